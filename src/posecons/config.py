@@ -1,0 +1,202 @@
+"""Typed, documented defaults for every setting, and YAML presets that name only what differs.
+
+A preset is a small YAML file with the same nesting as :class:`Config`; it may name a
+``base:`` preset (path relative to itself) that it extends. ``--set key=value`` overrides
+use dotted keys (``loss.constraints=[cyc]``). Unknown keys and wrong types are rejected
+before anything runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Union
+
+import yaml
+
+from .errors import PoseconsError
+
+CONSTRAINTS = ("fb", "id", "cyc")
+
+
+@dataclass
+class ModelConfig:
+    num_layers: int = 18  # ResNet depth for both encoders: 18, 34, 50; 10 is the small demo encoder
+    pretrained: Union[bool, str] = "auto"  # ImageNet weights: true (required), false, or "auto" (if reachable)
+    height: int = 192  # network input size; multiples of 32
+    width: int = 640
+    min_depth: float = 0.1
+    max_depth: float = 100.0
+    scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])
+    frame_ids: list[int] = field(default_factory=lambda: [0, -1, 1])  # target first, then sources
+
+
+@dataclass
+class LossConfig:
+    ssim_weight: float = 0.85  # photometric error = a·(1-SSIM)/2 + (1-a)·L1
+    smoothness_weight: float = 1e-3  # divided by 2^s at scale s
+    automask: bool = True
+    v1_multiscale: bool = False  # compute the photometric loss at each scale's native size
+    constraints: list[str] = field(default_factory=list)  # any of "fb", "id", "cyc"
+    fb_weight: float = 0.1
+    id_weight: float = 0.1
+    cyc_weight: float = 0.1
+    constraint_start_step: int = 0  # the authors' released code waited 2000 steps
+    identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
+    translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
+
+
+@dataclass
+class DataConfig:
+    dataset: str = "kitti_raw"  # kitti_raw (also synth and prepared custom data) or kitti_odom
+    split: str = "eigen_zhou"  # split files are read from <data_path>/splits/<split> unless --split-dir
+    img_ext: str = ".png"
+    calib_intrinsics: bool = True  # K from each drive's calibration; false: KITTI's fixed normalised K
+    flip_prob: float = 0.5
+    jitter_prob: float = 0.5
+    num_workers: int = 2
+
+
+@dataclass
+class TrainConfig:
+    batch_size: int = 12
+    lr: float = 1e-4
+    epochs: int = 20
+    lr_decay_epochs: list[int] = field(default_factory=lambda: [15])  # lr × lr_decay at these epochs
+    lr_decay: float = 0.1
+    grad_accum: int = 1
+    seed: int = 0
+    deterministic: bool = False
+    precision: str = "32"  # "32", "bf16" or "16" (mixed precision on GPU; geometry stays fp32)
+    sync_bn: bool = False
+    max_steps: int = 0  # 0: run all epochs
+    log_every: int = 50
+    image_every: int = 500
+    val_every: int = 0  # steps between validations; 0: once per epoch
+    max_bad_steps: int = 5  # consecutive non-finite losses before the run stops
+
+
+@dataclass
+class Config:
+    model: ModelConfig = field(default_factory=ModelConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def validate(self) -> "Config":
+        m, lo = self.model, self.loss
+        if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
+            raise PoseconsError(
+                f"model.height/width must be positive multiples of 32 (the encoder downsamples 32×); "
+                f"got {m.height}×{m.width}. Nearby sizes that work: "
+                f"{max(32, round(m.height / 32) * 32)}×{max(32, round(m.width / 32) * 32)}"
+            )
+        if m.num_layers not in (10, 18, 34, 50):
+            raise PoseconsError(f"model.num_layers must be 10, 18, 34 or 50, got {m.num_layers}")
+        if m.pretrained not in (True, False, "auto"):
+            raise PoseconsError(f"model.pretrained must be true, false or 'auto', got {m.pretrained!r}")
+        if not m.frame_ids or m.frame_ids[0] != 0 or len(set(m.frame_ids)) != len(m.frame_ids):
+            raise PoseconsError(f"model.frame_ids must start with 0 and have no repeats, got {m.frame_ids}")
+        bad = [c for c in lo.constraints if c not in CONSTRAINTS]
+        if bad:
+            raise PoseconsError(f"loss.constraints: unknown {bad}; choose from {list(CONSTRAINTS)}")
+        if ("fb" in lo.constraints or "cyc" in lo.constraints) and not {-1, 1} <= set(m.frame_ids):
+            raise PoseconsError("the fb and cyc constraints need model.frame_ids to contain -1 and 1")
+        if lo.translation_norm not in ("sum", "mean"):
+            raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
+        if self.train.precision not in ("32", "bf16", "16"):
+            raise PoseconsError(f"train.precision must be '32', 'bf16' or '16', got {self.train.precision!r}")
+        if self.data.dataset not in ("kitti_raw", "kitti_odom"):
+            raise PoseconsError(f"data.dataset must be kitti_raw or kitti_odom, got {self.data.dataset!r}")
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _check_type(value: Any, hint: Any, key: str) -> Any:
+    """Return ``value`` converted to ``hint`` where lossless (int → float), else raise."""
+    origin = typing.get_origin(hint)
+    if origin is Union:
+        for option in typing.get_args(hint):
+            try:
+                return _check_type(value, option, key)
+            except PoseconsError:
+                pass
+        raise PoseconsError(f"config key {key}: {value!r} is not a valid {hint}")
+    if origin is list:
+        (item,) = typing.get_args(hint)
+        if not isinstance(value, list):
+            raise PoseconsError(f"config key {key}: expected a list, got {value!r}")
+        return [_check_type(v, item, f"{key}[{i}]") for i, v in enumerate(value)]
+    if hint is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if hint is float and isinstance(value, str):  # YAML 1.1 reads "1e-3" (no dot) as a string
+        try:
+            return float(value)
+        except ValueError:
+            pass
+    if not isinstance(value, hint) or (hint is int and isinstance(value, bool)):
+        raise PoseconsError(f"config key {key}: expected {hint.__name__}, got {value!r}")
+    return value
+
+
+def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
+    hints = typing.get_type_hints(type(obj))
+    names = {f.name for f in dataclasses.fields(obj)}
+    for key, value in updates.items():
+        full = f"{prefix}{key}"
+        if key not in names:
+            raise PoseconsError(f"unknown config key {full!r}; known: {sorted(names)}")
+        current = getattr(obj, key)
+        if dataclasses.is_dataclass(current):
+            if not isinstance(value, dict):
+                raise PoseconsError(f"config key {full}: expected a mapping, got {value!r}")
+            _merge(current, value, full + ".")
+        else:
+            setattr(obj, key, _check_type(value, hints[key], full))
+
+
+def _read_preset(path: Path, seen: tuple[Path, ...] = ()) -> list[dict[str, Any]]:
+    path = path.resolve()
+    if path in seen:
+        raise PoseconsError(f"{path}: preset includes itself through 'base'")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except OSError as exc:
+        raise PoseconsError(f"cannot read config {path}: {exc.strerror}") from exc
+    except yaml.YAMLError as exc:
+        raise PoseconsError(f"{path}: not valid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise PoseconsError(f"{path}: a preset must be a mapping of sections, got {type(data).__name__}")
+    base = data.pop("base", None)
+    layers = _read_preset(path.parent / base, seen + (path,)) if base else []
+    return layers + [data]
+
+
+def parse_override(item: str) -> dict[str, Any]:
+    """``"loss.constraints=[cyc]"`` → ``{"loss": {"constraints": ["cyc"]}}`` (value parsed as YAML)."""
+    if "=" not in item:
+        raise PoseconsError(f"--set expects key=value, got {item!r}")
+    key, raw = item.split("=", 1)
+    value = yaml.safe_load(raw) if raw else ""
+    for part in reversed(key.strip().split(".")):
+        value = {part: value}
+    return value
+
+
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (),
+                base: dict[str, Any] | None = None) -> Config:
+    """Defaults ← ``base`` dict (e.g. a checkpoint's config) ← preset file (and its bases) ← overrides."""
+    config = Config()
+    layers = ([base] if base else []) + (_read_preset(Path(path)) if path else [])
+    layers += [parse_override(o) for o in overrides]
+    for layer in layers:
+        _merge(config, layer)
+    return config.validate()
+
+
+def config_from_dict(data: dict[str, Any]) -> Config:
+    return load_config(base=data)
