@@ -1,0 +1,122 @@
+import math
+
+import pytest
+import torch
+
+from posecons.geometry import (axis_angle_to_matrix, backproject, disp_to_depth, invert_pose, make_pose,
+                               pose_distance, pose_vec_to_mat, project, scale_intrinsics, warp)
+
+
+def random_pose(b: int, dtype=torch.float64) -> torch.Tensor:
+    return pose_vec_to_mat(torch.randn(b, 1, 3, dtype=dtype), torch.randn(b, 1, 3, dtype=dtype))
+
+
+@pytest.mark.parametrize("b", [1, 3, 12])
+def test_inverse_times_pose_is_identity(b):
+    T = random_pose(b)
+    eye = torch.eye(4, dtype=T.dtype).expand(b, 4, 4)
+    assert torch.allclose(invert_pose(T) @ T, eye, atol=1e-12)
+    assert torch.allclose(T @ invert_pose(T), eye, atol=1e-12)
+
+
+@pytest.mark.parametrize("b", [1, 3, 12])
+def test_batched_transposes_are_per_sample(b):
+    aa, t = torch.randn(b, 1, 3, dtype=torch.float64), torch.randn(b, 1, 3, dtype=torch.float64)
+    inv = pose_vec_to_mat(aa, t, invert=True)
+    assert torch.allclose(inv, invert_pose(pose_vec_to_mat(aa, t)), atol=1e-12)
+    for i in range(b):  # each sample against its own single-sample computation
+        single = pose_vec_to_mat(aa[i:i + 1], t[i:i + 1])
+        R = single[0, :3, :3]
+        assert torch.allclose(inv[i, :3, :3], R.T, atol=1e-12)
+        assert torch.allclose(inv[i, :3, 3], -R.T @ single[0, :3, 3], atol=1e-12)
+
+
+def test_rodrigues_matches_known_rotation_and_is_orthonormal():
+    R = axis_angle_to_matrix(torch.tensor([[0.0, 0.0, math.pi / 2]], dtype=torch.float64))[0]
+    assert torch.allclose(R @ torch.tensor([1.0, 0, 0], dtype=torch.float64),
+                          torch.tensor([0.0, 1, 0], dtype=torch.float64), atol=1e-12)
+    Rs = axis_angle_to_matrix(torch.randn(5, 3, dtype=torch.float64))
+    assert torch.allclose(Rs @ Rs.mT, torch.eye(3, dtype=torch.float64).expand(5, 3, 3), atol=1e-12)
+    assert torch.allclose(torch.linalg.det(Rs), torch.ones(5, dtype=torch.float64))
+
+
+def test_pose_distance_properties():
+    T, P = random_pose(6), random_pose(6)
+    assert torch.allclose(pose_distance(T, T), torch.zeros(6, dtype=T.dtype), atol=1e-12)
+    assert torch.allclose(pose_distance(T, P), pose_distance(P, T), atol=1e-12)
+    assert (pose_distance(T, P) > 0).all()
+
+
+def test_pose_distance_formula():
+    angle = 0.3
+    R = axis_angle_to_matrix(torch.tensor([[0.0, angle, 0.0]], dtype=torch.float64))
+    T = make_pose(R, torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64))
+    P = make_pose(torch.eye(3, dtype=torch.float64)[None], torch.tensor([[0.5, 2.0, 4.0]], dtype=torch.float64))
+    expected = abs(1 - ((1 + 2 * math.cos(angle)) - 1) / 2) + 0.5 + 0.0 + 1.0
+    assert pose_distance(T, P).item() == pytest.approx(expected, abs=1e-12)
+    assert pose_distance(T, P, "mean").item() == pytest.approx(expected - 1.5 + 0.5, abs=1e-12)
+
+
+def test_gradients_finite_at_zero_rotation():
+    aa = torch.zeros(2, 1, 3, dtype=torch.float64, requires_grad=True)
+    t = torch.zeros(2, 1, 3, dtype=torch.float64, requires_grad=True)
+    T = pose_vec_to_mat(aa, t)
+    W = torch.randn(4, 4, dtype=torch.float64)
+    ((T * W).sum() + pose_distance(T, torch.eye(4, dtype=T.dtype).expand(2, 4, 4)).sum()).backward()
+    assert torch.isfinite(aa.grad).all() and torch.isfinite(t.grad).all()
+    # At e = 0, dR/de is the skew matrix: d/de_x Σ W∘R = W[2,1] − W[1,2], and so on.
+    expected = torch.stack([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+    assert torch.allclose(aa.grad[:, 0], expected.expand(2, 3), atol=1e-9)
+
+
+def test_disp_to_depth_range():
+    scaled, depth = disp_to_depth(torch.tensor([0.0, 1.0]), 0.1, 100.0)
+    assert torch.allclose(depth, torch.tensor([100.0, 0.1]))
+    assert torch.allclose(scaled * depth, torch.ones(2))
+
+
+def test_scale_intrinsics_per_level():
+    K = torch.tensor([[[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]]])
+    for s in range(4):
+        Ks = scale_intrinsics(K, 192 // 2 ** s, 640 // 2 ** s)
+        assert Ks[0, 0, 0].item() == pytest.approx(0.58 * 640 / 2 ** s)
+        assert Ks[0, 1, 2].item() == pytest.approx(0.5 * 192 / 2 ** s)
+
+
+def test_backproject_project_round_trip():
+    K = torch.tensor([[[50.0, 0, 15.5], [0, 50.0, 7.5], [0, 0, 1]]]).repeat(2, 1, 1)
+    depth = torch.rand(2, 1, 16, 32) * 10 + 1
+    pix = project(backproject(depth, K), K)
+    v, u = torch.meshgrid(torch.arange(16.0), torch.arange(32.0), indexing="ij")
+    assert torch.allclose(pix[:, 0], u.flatten().expand(2, -1), atol=1e-3)
+    assert torch.allclose(pix[:, 1], v.flatten().expand(2, -1), atol=1e-3)
+
+
+def test_identity_pose_reproduces_image_for_any_depth():
+    img = torch.rand(3, 3, 24, 40)
+    depth = torch.rand(3, 1, 24, 40) * 50 + 0.5
+    K = torch.tensor([[30.0, 0, 20], [0, 30.0, 12], [0, 0, 1]]).expand(3, 3, 3)
+    warped = warp(img, depth, torch.eye(4).expand(3, 4, 4), K)
+    assert torch.allclose(warped, img, atol=1e-4)
+
+
+def test_x_translation_shifts_pixels_by_fx_t_over_z():
+    h, w, fx, z, tx = 8, 64, 40.0, 10.0, 1.0  # shift = fx·t/Z = 4 pixels
+    ramp = torch.arange(w, dtype=torch.float32).expand(1, 1, h, w).clone()
+    K = torch.tensor([[[fx, 0, w / 2], [0, fx, h / 2], [0, 0, 1]]])
+    T = make_pose(torch.eye(3)[None], torch.tensor([[tx, 0.0, 0.0]]))
+    warped = warp(ramp, torch.full((1, 1, h, w), z), T, K)
+    shift = fx * tx / z
+    # target pixel u samples the source at u + shift (the source camera sees the point moved by +t)
+    assert torch.allclose(warped[..., : w - 5], ramp[..., : w - 5] + shift, atol=1e-3)
+
+
+def test_bad_shapes_and_dtypes_name_the_argument():
+    with pytest.raises(ValueError, match=r"axisangle.*\(\*, 1, 3\).*\(2, 3\)"):
+        pose_vec_to_mat(torch.zeros(2, 3), torch.zeros(2, 1, 3))
+    with pytest.raises(ValueError, match="translation"):
+        pose_vec_to_mat(torch.zeros(2, 1, 3), torch.zeros(3, 1, 3))
+    with pytest.raises(ValueError, match="T: expected a floating-point tensor"):
+        invert_pose(torch.zeros(2, 4, 4, dtype=torch.long))
+    with pytest.raises(ValueError, match="depth"):
+        backproject(torch.zeros(2, 16, 32), torch.eye(3).expand(2, 3, 3))
