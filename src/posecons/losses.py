@@ -1,0 +1,98 @@
+"""Losses: Monodepth2's photometric and smoothness terms (SPEC §4) and the paper's three
+pose constraints (SPEC §5). Each function is one equation.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from .geometry import check_tensor, invert_pose, pose_distance
+
+_IMAGE = (None, None, None, None)
+
+
+def ssim_dissimilarity(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """clamp((1 − SSIM(x, y)) / 2, 0, 1) per pixel and channel, (B, C, H, W).
+
+    Local statistics use a 3×3 box filter on reflection-padded inputs; C1 = 0.01², C2 = 0.03².
+    """
+    check_tensor("x", x, _IMAGE)
+    check_tensor("y", y, tuple(x.shape))
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    x, y = F.pad(x, (1, 1, 1, 1), mode="reflect"), F.pad(y, (1, 1, 1, 1), mode="reflect")
+    mu_x, mu_y = F.avg_pool2d(x, 3, 1), F.avg_pool2d(y, 3, 1)
+    var_x = F.avg_pool2d(x * x, 3, 1) - mu_x ** 2
+    var_y = F.avg_pool2d(y * y, 3, 1) - mu_y ** 2
+    cov = F.avg_pool2d(x * y, 3, 1) - mu_x * mu_y
+    ssim = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x ** 2 + mu_y ** 2 + c1) * (var_x + var_y + c2))
+    return ((1 - ssim) / 2).clamp(0, 1)
+
+
+def photometric_error(pred: torch.Tensor, target: torch.Tensor, ssim_weight: float = 0.85) -> torch.Tensor:
+    """pe = 0.85·mean_c((1 − SSIM)/2) + 0.15·mean_c|pred − target|, (B, 1, H, W)."""
+    check_tensor("pred", pred, _IMAGE)
+    check_tensor("target", target, tuple(pred.shape))
+    l1 = (pred - target).abs().mean(1, keepdim=True)
+    return ssim_weight * ssim_dissimilarity(pred, target).mean(1, keepdim=True) + (1 - ssim_weight) * l1
+
+
+def min_reprojection(reprojection: torch.Tensor, identity: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-pixel minimum over sources, with auto-masking (SPEC §4).
+
+    reprojection: pe(warped_f, I_0) stacked over sources, (B, S, H, W); identity: pe(I_f, I_0)
+    for the unwarped sources, (B, S, H, W), or None to disable auto-masking. Identity errors
+    get Gaussian noise (std 1e-5) to break ties. Returns the per-pixel minimum (B, H, W) and the
+    mask of pixels where a warped source won (B, H, W). Where an identity term wins, the value
+    holds no network output, so those pixels drop out of the gradient (as in Monodepth2, the
+    constant still counts in the mean's value).
+    """
+    check_tensor("reprojection", reprojection, _IMAGE)
+    if identity is None:
+        loss = reprojection.min(1).values
+        return loss, torch.ones_like(loss, dtype=torch.bool)
+    check_tensor("identity", identity, tuple(reprojection.shape))
+    identity = identity + torch.randn_like(identity) * 1e-5
+    combined, idx = torch.cat([identity, reprojection], 1).min(1)
+    keep = idx >= identity.shape[1]
+    return combined, keep
+
+
+def smoothness_loss(disp: torch.Tensor, img: torch.Tensor) -> torch.Tensor:
+    """Edge-aware smoothness of mean-normalised disparity (B, 1, h, w) against img (B, 3, h, w)."""
+    check_tensor("disp", disp, (None, 1, None, None))
+    check_tensor("img", img, (disp.shape[0], None, disp.shape[2], disp.shape[3]))
+    d = disp / (disp.mean((2, 3), keepdim=True) + 1e-7)
+    grad_dx = (d[..., :, :-1] - d[..., :, 1:]).abs()
+    grad_dy = (d[..., :-1, :] - d[..., 1:, :]).abs()
+    grad_ix = (img[..., :, :-1] - img[..., :, 1:]).abs().mean(1, keepdim=True)
+    grad_iy = (img[..., :-1, :] - img[..., 1:, :]).abs().mean(1, keepdim=True)
+    return (grad_dx * torch.exp(-grad_ix)).mean() + (grad_dy * torch.exp(-grad_iy)).mean()
+
+
+# ----------------------------------------------------------------------------- pose constraints
+
+def forward_backward_loss(t_fwd: torch.Tensor, t_bwd: torch.Tensor, translation_norm: str = "sum") -> torch.Tensor:
+    """mean d(T_{f←0}, inverse(T_{0←f})): the pose of a pair and of the reversed pair must be inverses.
+
+    t_fwd: T_{f←0} (B, 4, 4); t_bwd: T_{0←f} predicted from the reversed pair (B, 4, 4).
+    """
+    return pose_distance(t_fwd, invert_pose(t_bwd), translation_norm).mean()
+
+
+def identity_loss(axisangle: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
+    """mean(‖e‖₁ + ‖t‖₁) of the pose net's raw output for the pair (I_0, I_0)."""
+    check_tensor("axisangle", axisangle, (None, 1, 3))
+    check_tensor("translation", translation, tuple(axisangle.shape))
+    return (axisangle.abs().sum((1, 2)) + translation.abs().sum((1, 2))).mean()
+
+
+def cycle_loss(t_skip: torch.Tensor, t_first: torch.Tensor, t_second: torch.Tensor,
+               translation_norm: str = "sum") -> torch.Tensor:
+    """mean d(T_{+1←−1}, T_{+1←0} · T_{0←−1}): the skip pose must equal the composed pair.
+
+    t_skip: T_{+1←−1}; t_first: T_{0←−1}; t_second: T_{+1←0}; each (B, 4, 4).
+    """
+    check_tensor("t_second", t_second, (None, 4, 4))
+    check_tensor("t_first", t_first, tuple(t_second.shape))
+    return pose_distance(t_skip, t_second @ t_first, translation_norm).mean()

@@ -1,0 +1,168 @@
+"""Depth and pose networks (SPEC §2): torchvision ResNet encoders, a U-Net depth decoder
+with four sigmoid disparity scales, and a small pose decoder.
+"""
+
+from __future__ import annotations
+
+import warnings
+from urllib.error import URLError
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+import torchvision.models as tvm
+
+from .errors import PoseconsError
+from .geometry import check_tensor
+
+# num_layers → (torchvision constructor, ImageNet weights enum); 10 is a small demo encoder
+# (one basic block per stage) that has no published ImageNet weights.
+_RESNETS = {
+    10: (lambda: tvm.resnet.ResNet(tvm.resnet.BasicBlock, [1, 1, 1, 1]), None),
+    18: (tvm.resnet18, tvm.ResNet18_Weights.IMAGENET1K_V1),
+    34: (tvm.resnet34, tvm.ResNet34_Weights.IMAGENET1K_V1),
+    50: (tvm.resnet50, tvm.ResNet50_Weights.IMAGENET1K_V1),
+}
+
+
+def load_imagenet_state(num_layers: int, pretrained: bool | str) -> dict | None:
+    """ImageNet weights for a ResNet, through torchvision's download cache.
+
+    ``pretrained``: True (required: raise if unavailable), False, or "auto" (warn and train
+    from scratch when the weights cannot be had, e.g. offline).
+    """
+    if pretrained is False:
+        return None
+    weights = _RESNETS[num_layers][1]
+    try:
+        if weights is None:
+            raise LookupError(f"no ImageNet weights exist for the ResNet-{num_layers} demo encoder")
+        return weights.get_state_dict(progress=False, check_hash=True)
+    except (URLError, OSError, RuntimeError, LookupError) as exc:
+        message = (f"ImageNet weights for ResNet-{num_layers} are not available ({exc}). "
+                   "With internet access torchvision downloads them into $TORCH_HOME/hub/checkpoints; "
+                   "offline, copy the file there or set model.pretrained=false.")
+        if pretrained is True:
+            raise PoseconsError(message) from exc
+        warnings.warn(message + " Training from scratch.", stacklevel=2)
+        return None
+
+
+class ResnetEncoder(nn.Module):
+    """ResNet features at 1/2, 1/4, 1/8, 1/16, 1/32 of the input.
+
+    ``num_input_images=2`` widens conv1 to a 6-channel frame pair (the pose encoder); ImageNet
+    conv1 weights are then tiled over both images and halved, so a pair of equal images
+    gives the pretrained response.
+    """
+
+    def __init__(self, num_layers: int = 18, pretrained: bool | str = False, num_input_images: int = 1):
+        super().__init__()
+        if num_layers not in _RESNETS:
+            raise PoseconsError(f"num_layers must be one of {sorted(_RESNETS)}, got {num_layers}")
+        self.net = _RESNETS[num_layers][0]()
+        self.num_input_images = num_input_images
+        state = load_imagenet_state(num_layers, pretrained)
+        if num_input_images > 1:
+            self.net.conv1 = nn.Conv2d(3 * num_input_images, 64, kernel_size=7, stride=2, padding=3, bias=False)
+            if state is not None:
+                state["conv1.weight"] = state["conv1.weight"].repeat(1, num_input_images, 1, 1) / num_input_images
+        if state is not None:
+            self.net.load_state_dict(state)
+        del self.net.fc, self.net.avgpool  # classification head unused
+        expansion = 4 if num_layers >= 50 else 1
+        self.num_ch_enc = [64] + [c * expansion for c in (64, 128, 256, 512)]
+
+    def forward(self, images: torch.Tensor) -> list[torch.Tensor]:
+        """images (B, 3·n, H, W) in [0, 1], H and W multiples of 32 → five feature maps."""
+        check_tensor("images", images, (None, 3 * self.num_input_images, None, None))
+        h, w = images.shape[-2:]
+        if h % 32 or w % 32:
+            raise PoseconsError(
+                f"image size {h}×{w} is not a multiple of 32: resize to e.g. "
+                f"{max(32, round(h / 32) * 32)}×{max(32, round(w / 32) * 32)} (height×width)")
+        n = self.net
+        x = n.relu(n.bn1(n.conv1((images - 0.45) / 0.225)))
+        feats = [x]
+        x = n.layer1(n.maxpool(x))
+        feats.append(x)
+        for layer in (n.layer2, n.layer3, n.layer4):
+            x = layer(x)
+            feats.append(x)
+        return feats
+
+
+class Conv3x3(nn.Sequential):
+    """Reflection-padded 3×3 convolution, optionally followed by ELU."""
+
+    def __init__(self, cin: int, cout: int, elu: bool = True):
+        super().__init__(nn.ReflectionPad2d(1), nn.Conv2d(cin, cout, 3), *([nn.ELU(inplace=True)] if elu else []))
+
+
+class DepthDecoder(nn.Module):
+    """U-Net decoder: returns sigmoid disparities ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale."""
+
+    def __init__(self, num_ch_enc: list[int], scales: tuple[int, ...] = (0, 1, 2, 3)):
+        super().__init__()
+        self.scales = tuple(scales)
+        ch = [16, 32, 64, 128, 256]
+        self.up_in = nn.ModuleList()
+        self.up_out = nn.ModuleList()
+        for i in range(5):
+            cin = num_ch_enc[4] if i == 4 else ch[i + 1]
+            self.up_in.append(Conv3x3(cin, ch[i]))
+            self.up_out.append(Conv3x3(ch[i] + (num_ch_enc[i - 1] if i > 0 else 0), ch[i]))
+        self.disp_convs = nn.ModuleDict({str(s): Conv3x3(ch[s], 1, elu=False) for s in self.scales})
+
+    def forward(self, feats: list[torch.Tensor]) -> dict[int, torch.Tensor]:
+        out = {}
+        x = feats[4]
+        for i in range(4, -1, -1):
+            x = F.interpolate(self.up_in[i](x), scale_factor=2, mode="nearest")
+            if i > 0:
+                x = torch.cat([x, feats[i - 1]], 1)
+            x = self.up_out[i](x)
+            if i in self.scales:
+                out[i] = torch.sigmoid(self.disp_convs[str(i)](x))
+        return out
+
+
+class PoseDecoder(nn.Module):
+    """Deepest pose-encoder feature → (axis-angle (B, 1, 3), translation (B, 1, 3)), scaled by 0.01."""
+
+    def __init__(self, num_ch_in: int):
+        super().__init__()
+        self.net = nn.Sequential(
+            nn.Conv2d(num_ch_in, 256, 1), nn.ReLU(inplace=True),
+            nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(inplace=True),
+            nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(inplace=True),
+            nn.Conv2d(256, 6, 1),
+        )
+
+    def forward(self, feature: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        out = 0.01 * self.net(feature).mean((2, 3)).view(-1, 1, 6)
+        return out[..., :3], out[..., 3:]
+
+
+class DepthNet(nn.Module):
+    """One RGB frame (B, 3, H, W) → sigmoid disparities per scale."""
+
+    def __init__(self, num_layers: int = 18, pretrained: bool | str = False, scales=(0, 1, 2, 3)):
+        super().__init__()
+        self.encoder = ResnetEncoder(num_layers, pretrained)
+        self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales)
+
+    def forward(self, images: torch.Tensor) -> dict[int, torch.Tensor]:
+        return self.decoder(self.encoder(images))
+
+
+class PoseNet(nn.Module):
+    """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
+
+    def __init__(self, num_layers: int = 18, pretrained: bool | str = False):
+        super().__init__()
+        self.encoder = ResnetEncoder(num_layers, pretrained, num_input_images=2)
+        self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
+
+    def forward(self, image_a: torch.Tensor, image_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.decoder(self.encoder(torch.cat([image_a, image_b], 1))[-1])
