@@ -1,0 +1,106 @@
+"""Checkpoint files: written atomically, read without unpickling arbitrary objects.
+
+A training checkpoint (``.pt``) is a plain dict of tensors, numbers, strings, lists and
+dicts — ``{"config": Config.to_dict(), "model": state_dict, ...training state}`` — so
+``torch.load(weights_only=True)`` reads it. Exported weights (``.safetensors``) hold the
+model state dict with the config as JSON metadata.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from .config import Config, config_from_dict
+from .errors import PoseconsError
+
+
+def atomic_write(path: str | Path, write) -> None:
+    """Call ``write(tmp_path)`` then rename onto ``path``: readers never see a partial file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_checkpoint(path: str | Path, state: dict[str, Any]) -> None:
+    atomic_write(path, lambda tmp: torch.save(state, tmp))
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Read a ``.pt`` checkpoint with ``weights_only=True``; clear errors for bad files."""
+    path = Path(path)
+    if not path.is_file():
+        raise PoseconsError(f"checkpoint {path} does not exist")
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise PoseconsError(f"{path}: refused to load — it holds objects other than weights and plain "
+                            f"data (not a posecons checkpoint, or unsafe): {str(exc).splitlines()[0]}") from exc
+    except (RuntimeError, EOFError, OSError) as exc:
+        raise PoseconsError(f"{path}: not a readable checkpoint ({exc})") from exc
+    if not isinstance(state, dict) or "config" not in state or "model" not in state:
+        raise PoseconsError(f"{path}: not a posecons checkpoint (no 'config' and 'model' entries)")
+    return state
+
+
+def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
+    """Checkpoint (``.pt``) or exported weights (``.safetensors``) → (PoseConsModel in eval mode, Config)."""
+    from .model import PoseConsModel
+
+    path = Path(path)
+    if path.suffix == ".safetensors":
+        config, weights = _read_safetensors(path, map_location)
+    else:
+        state = load_checkpoint(path, map_location)
+        config, weights = _config(state["config"], path), state["model"]
+    config.model.pretrained = False  # the weights come from the file
+    model = PoseConsModel(config)
+    try:
+        model.load_state_dict(weights)
+    except RuntimeError as exc:
+        raise PoseconsError(f"{path}: weights do not fit the architecture in its config "
+                            f"(ResNet-{config.model.num_layers}): {str(exc).splitlines()[0]}") from exc
+    return model.to(map_location).eval(), config
+
+
+def _config(data: Any, path: Path) -> Config:
+    try:
+        return config_from_dict(data)
+    except PoseconsError as exc:
+        raise PoseconsError(f"{path}: its stored config is invalid: {exc}") from exc
+
+
+def _read_safetensors(path: Path, map_location) -> tuple[Config, dict[str, torch.Tensor]]:
+    from safetensors import SafetensorError, safe_open
+
+    if not path.is_file():
+        raise PoseconsError(f"weights file {path} does not exist")
+    try:
+        with safe_open(str(path), framework="pt", device=str(map_location)) as f:
+            meta = f.metadata() or {}
+            weights = {k: f.get_tensor(k) for k in f.keys()}
+    except (SafetensorError, OSError) as exc:
+        raise PoseconsError(f"{path}: not a readable safetensors file ({exc})") from exc
+    if "config" not in meta:
+        raise PoseconsError(f"{path}: no posecons config in its metadata")
+    return _config(json.loads(meta["config"]), path), weights
+
+
+def save_safetensors(path: str | Path, model, config: Config) -> None:
+    from safetensors.torch import save_file
+
+    state = {k: v.detach().contiguous().cpu() for k, v in model.state_dict().items()}
+    atomic_write(path, lambda tmp: save_file(state, tmp, metadata={"config": json.dumps(config.to_dict())}))
