@@ -1,0 +1,215 @@
+"""Depth metrics and the standard KITTI depth protocol (SPEC §9).
+
+Plain numpy functions, cheap enough for training-time validation. The protocol:
+resize the predicted (scaled) disparity bilinearly to the GT size (``align_corners=False``),
+depth = 1 / disparity, mask the valid GT pixels, scale (per frame, per sequence or not at all),
+clamp the prediction to [1e-3, 80] m, then average the per-frame metrics over frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..errors import PoseconsError
+
+MIN_DEPTH = 1e-3
+MAX_DEPTH = 80.0
+# Garg et al.'s crop as fractions of (H, W): rows [top, bottom), cols [left, right).
+GARG_CROP = (0.40810811, 0.99189189, 0.03594771, 0.96405229)
+METRIC_NAMES = ("abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3")
+SCALINGS = ("frame", "sequence", "none")
+CROPS = ("garg", "none")
+# Which mask each kind of ground truth is evaluated with.
+CROP_FOR_GT_KIND = {"lidar": "garg", "improved": "none"}
+
+
+def garg_crop_bounds(height: int, width: int) -> tuple[int, int, int, int]:
+    """(top, bottom, left, right) pixel bounds of the Garg crop; int() of each fractional bound."""
+    top, bottom, left, right = GARG_CROP
+    return int(top * height), int(bottom * height), int(left * width), int(right * width)
+
+
+def valid_mask(gt: np.ndarray, crop: str = "garg") -> np.ndarray:
+    """Boolean (H, W) mask of the GT pixels that are evaluated.
+
+    ``garg``: 1e-3 < gt < 80 inside the Garg crop (Eigen split, LiDAR GT);
+    ``none``: gt > 0 everywhere (KITTI improved GT, eigen_benchmark).
+    """
+    if crop == "none":
+        return gt > 0
+    if crop != "garg":
+        raise PoseconsError(f"unknown crop {crop!r}; expected one of {CROPS}")
+    top, bottom, left, right = garg_crop_bounds(*gt.shape)
+    in_crop = np.zeros(gt.shape, dtype=bool)
+    in_crop[top:bottom, left:right] = True
+    return in_crop & (gt > MIN_DEPTH) & (gt < MAX_DEPTH)
+
+
+def resize_disparity(disp: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Bilinearly resize a (h, w) disparity to (height, width), half-pixel centres (align_corners=False)."""
+    if disp.shape == (height, width):
+        return np.asarray(disp, dtype=np.float32)
+    t = torch.as_tensor(np.asarray(disp, dtype=np.float32))[None, None]
+    return F.interpolate(t, size=(height, width), mode="bilinear", align_corners=False)[0, 0].numpy()
+
+
+def compute_depth_metrics(gt: np.ndarray, pred: np.ndarray) -> dict[str, float]:
+    """The seven standard metrics for one frame; gt and pred are matching 1-D arrays of valid depths (m)."""
+    gt = np.asarray(gt, dtype=np.float64)
+    pred = np.asarray(pred, dtype=np.float64)
+    ratio = np.maximum(gt / pred, pred / gt)
+    diff = gt - pred
+    return {
+        "abs_rel": float(np.mean(np.abs(diff) / gt)),
+        "sq_rel": float(np.mean(diff**2 / gt)),
+        "rmse": float(np.sqrt(np.mean(diff**2))),
+        "rmse_log": float(np.sqrt(np.mean((np.log(gt) - np.log(pred)) ** 2))),
+        "a1": float(np.mean(ratio < 1.25)),
+        "a2": float(np.mean(ratio < 1.25**2)),
+        "a3": float(np.mean(ratio < 1.25**3)),
+    }
+
+
+def median_scale(gt: np.ndarray, pred: np.ndarray) -> float:
+    """Median scaling factor median(gt) / median(pred) over matching 1-D arrays of valid depths."""
+    return float(np.median(gt) / np.median(pred))
+
+
+def check_disparities(disps: np.ndarray, name: str = "predictions") -> np.ndarray:
+    """Validate (N, h, w) disparities (a singleton channel (N, 1, h, w) is squeezed); returns float32."""
+    disps = np.asarray(disps)
+    if disps.ndim == 4 and disps.shape[1] == 1:
+        disps = disps[:, 0]
+    if disps.ndim != 3:
+        raise PoseconsError(f"{name}: expected disparities of shape (N, h, w), got {disps.shape}")
+    disps = disps.astype(np.float32, copy=False)
+    bad = ~np.isfinite(disps) | (disps <= 0)
+    if bad.any():
+        frames = np.flatnonzero(bad.any(axis=(1, 2)))
+        raise PoseconsError(
+            f"{name}: {int(bad.sum())} NaN/inf or non-positive disparities in {frames.size} frame(s), "
+            f"first at frame {int(frames[0])}; disparities must be finite and > 0"
+        )
+    return disps
+
+
+def scale_consistency(scales: Sequence[float], sequences: Sequence[str]) -> dict:
+    """Scale consistency of per-frame median scales (N,) grouped by sequence name (N,).
+
+    NaN scales (skipped frames) are ignored. σ is numpy's population std (ddof=0).
+    Returns ``scale_cv`` (mean over sequences of σ/μ), ``scale_cv_pooled`` (σ/μ over all frames),
+    ``scale_std_over_median`` (std(s / median(s)) over all frames, as Monodepth2 printed),
+    ``scale_median`` and ``per_sequence`` {name: {n, scale_mean, scale_cv}} in first-seen order.
+    """
+    scales = np.asarray(scales, dtype=np.float64)
+    if len(scales) != len(sequences):
+        raise PoseconsError(f"{len(scales)} scales but {len(sequences)} sequence names")
+    ok = np.isfinite(scales)
+    if not ok.any():
+        raise PoseconsError("no frame has a valid scale")
+    per_sequence = {}
+    for name in dict.fromkeys(sequences):
+        s = scales[ok & (np.asarray(sequences) == name)]
+        if s.size:
+            per_sequence[name] = {"n": int(s.size), "scale_mean": float(s.mean()),
+                                  "scale_cv": float(s.std() / s.mean())}
+    pooled = scales[ok]
+    return {
+        "scale_cv": float(np.mean([v["scale_cv"] for v in per_sequence.values()])),
+        "scale_cv_pooled": float(pooled.std() / pooled.mean()),
+        "scale_std_over_median": float(np.std(pooled / np.median(pooled))),
+        "scale_median": float(np.median(pooled)),
+        "per_sequence": per_sequence,
+    }
+
+
+def scale_factors(scales: np.ndarray, sequences: Sequence[str], scaling: str) -> np.ndarray:
+    """(N,) factors that multiply each frame's predicted depth, from the (N,) frame scales (NaN = skipped)."""
+    if scaling == "frame":
+        return np.asarray(scales, dtype=np.float64)
+    factors = np.ones(len(scales))
+    if scaling == "sequence":
+        names = np.asarray(sequences)
+        for name in dict.fromkeys(sequences):
+            members = names == name
+            if np.isfinite(scales[members]).any():  # a fully skipped sequence keeps 1 (never used)
+                factors[members] = np.nanmedian(scales[members])
+    return factors
+
+
+def evaluate_depth(
+    pred_disps: np.ndarray | Sequence[np.ndarray],
+    gt_depths: Sequence[np.ndarray],
+    sequences: Sequence[str],
+    scaling: str = "frame",
+    crop: str = "garg",
+    pred_name: str = "predictions",
+    gt_name: str = "ground truth",
+) -> dict:
+    """Evaluate N predicted disparities against N GT depth maps (split order).
+
+    pred_disps: (N, h, w) scaled disparities; gt_depths: N arrays (H_i, W_i) in metres (0 = none);
+    sequences: N sequence names (the split line's folder). ``scaling`` is ``frame``, ``sequence``
+    (one factor per sequence: the median of its frame scales) or ``none``; ``crop`` is ``garg`` or
+    ``none`` (see :func:`valid_mask`). Frames without valid GT pixels are skipped and listed.
+    ``pred_name``/``gt_name`` name the inputs in error messages (e.g. file paths).
+
+    Returns the metric means over evaluated frames plus ``scales`` (per-frame median ratios, NaN
+    for skipped frames), the :func:`scale_consistency` keys, ``per_frame_abs_rel``,
+    ``per_sequence`` ({name: {n, scale_mean, scale_cv, abs_rel}}), ``n_frames``, ``skipped``.
+    """
+    if scaling not in SCALINGS:
+        raise PoseconsError(f"unknown scaling {scaling!r}; expected one of {SCALINGS}")
+    if crop not in CROPS:
+        raise PoseconsError(f"unknown crop {crop!r}; expected one of {CROPS}")
+    disps = check_disparities(pred_disps, pred_name)
+    if not (len(disps) == len(gt_depths) == len(sequences)):
+        raise PoseconsError(
+            f"{pred_name} has {len(disps)} frames but {gt_name} has {len(gt_depths)} "
+            f"(and {len(sequences)} split lines); they must match one to one"
+        )
+
+    # Pass 1: valid pixels and the per-frame median scale of every frame.
+    valid_pairs: list[tuple[np.ndarray, np.ndarray] | None] = []
+    scales = np.full(len(disps), np.nan)
+    for i, (disp, gt) in enumerate(zip(disps, gt_depths)):
+        gt = np.asarray(gt, dtype=np.float32)
+        if gt.ndim != 2:
+            raise PoseconsError(f"{gt_name}: frame {i} has shape {gt.shape}, expected (H, W)")
+        mask = valid_mask(gt, crop)
+        if not mask.any():
+            valid_pairs.append(None)
+            continue
+        pred_depth = 1.0 / resize_disparity(disp, *gt.shape)[mask]
+        valid_pairs.append((gt[mask], pred_depth))
+        scales[i] = median_scale(gt[mask], pred_depth)
+    evaluated = np.flatnonzero(np.isfinite(scales))
+    if evaluated.size == 0:
+        raise PoseconsError(f"{gt_name}: no frame has valid ground-truth pixels")
+
+    # Pass 2: apply the chosen scaling, clamp, and compute the per-frame metrics.
+    sequences = list(sequences)
+    factors = scale_factors(scales, sequences, scaling)
+    per_frame = {}
+    for i in evaluated:
+        gt, pred = valid_pairs[i]
+        pred = np.clip(pred * factors[i], MIN_DEPTH, MAX_DEPTH)
+        per_frame[int(i)] = compute_depth_metrics(gt, pred)
+
+    result: dict = {k: float(np.mean([m[k] for m in per_frame.values()])) for k in METRIC_NAMES}
+    result.update(scaling=scaling, crop=crop, n_frames=int(evaluated.size))
+    result.update(scale_consistency(scales, sequences))
+    for name, stats in result["per_sequence"].items():
+        stats["abs_rel"] = float(np.mean([m["abs_rel"] for i, m in per_frame.items() if sequences[i] == name]))
+    skipped = [i for i in range(len(disps)) if i not in per_frame]
+    result.update(
+        scales=[float(s) for s in scales],  # NaN for skipped frames; written as null in JSON
+        per_frame_abs_rel=[per_frame[i]["abs_rel"] if i in per_frame else float("nan") for i in range(len(disps))],
+        n_skipped=len(skipped),
+        skipped=skipped,
+    )
+    return result

@@ -1,0 +1,124 @@
+"""Depth metrics and the standard protocol (SPEC §9) on small hand-computed cases."""
+
+import numpy as np
+import pytest
+
+from posecons.errors import PoseconsError
+from posecons.evaluation.depth import (MAX_DEPTH, MIN_DEPTH, compute_depth_metrics, evaluate_depth,
+                                       garg_crop_bounds, resize_disparity, scale_consistency, valid_mask)
+
+
+def test_garg_crop_bounds_on_a_kitti_frame():
+    # int(0.40810811·375) = 153, int(0.99189189·375) = 371, int(0.03594771·1242) = 44, int(0.96405229·1242) = 1197
+    assert garg_crop_bounds(375, 1242) == (153, 371, 44, 1197)
+    mask = valid_mask(np.full((375, 1242), 10.0, np.float32), "garg")
+    rows, cols = np.nonzero(mask)
+    assert (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1) == (153, 371, 44, 1197)
+    assert mask.sum() == (371 - 153) * (1197 - 44)
+
+
+def test_mask_depth_limits():
+    gt = np.zeros((375, 1242), np.float32)
+    gt[200, 100:105] = [MIN_DEPTH, 0.5, 79.9, MAX_DEPTH, 120.0]
+    assert valid_mask(gt, "garg")[200, 100:105].tolist() == [False, True, True, False, False]
+    # Improved GT: gt > 0 everywhere, no crop and no 80 m cap.
+    gt[0, 0] = 5.0
+    assert valid_mask(gt, "none").sum() == 6
+
+
+def test_metrics_by_hand():
+    gt = np.array([2.0, 4.0])
+    pred = np.array([1.1, 5.0])
+    m = compute_depth_metrics(gt, pred)
+    assert m["abs_rel"] == pytest.approx((0.9 / 2 + 1 / 4) / 2)
+    assert m["sq_rel"] == pytest.approx((0.81 / 2 + 1 / 4) / 2)
+    assert m["rmse"] == pytest.approx(np.sqrt((0.81 + 1) / 2))
+    assert m["rmse_log"] == pytest.approx(np.sqrt((np.log(2 / 1.1) ** 2 + np.log(0.8) ** 2) / 2))
+    # ratios max(gt/pred, pred/gt) = 1.818 and 1.25; thresholds are strict: 1.25, 1.5625, 1.953
+    assert (m["a1"], m["a2"], m["a3"]) == (0.0, 0.5, 1.0)
+
+
+def test_resize_is_bilinear_half_pixel():
+    disp = np.array([[1.0, 3.0]], np.float32)
+    # Doubling the width with align_corners=False: centres at 0.25, 0.75, 1.25, 1.75 (edges clamp).
+    assert resize_disparity(disp, 1, 4)[0].tolist() == pytest.approx([1.0, 1.5, 2.5, 3.0])
+
+
+def _frame(gt_depth: float, pred_depth: float, shape=(375, 1242)) -> tuple[np.ndarray, np.ndarray]:
+    """Constant GT and a constant predicted disparity at a quarter of the GT size."""
+    gt = np.full(shape, gt_depth, np.float32)
+    disp = np.full((shape[0] // 4, shape[1] // 4), 1.0 / pred_depth, np.float32)
+    return disp, gt
+
+
+def test_median_scaling_and_clamp():
+    disp, gt = _frame(10.0, 2.0)
+    r = evaluate_depth(disp[None], [gt], ["a"], scaling="frame")
+    assert r["scales"] == pytest.approx([5.0])
+    assert r["abs_rel"] == pytest.approx(0.0, abs=1e-6)
+    # No scaling: pred stays 2 m → abs rel 0.8; a prediction of 500 m is clamped to 80 m.
+    assert evaluate_depth(disp[None], [gt], ["a"], scaling="none")["abs_rel"] == pytest.approx(0.8)
+    far, gt = _frame(10.0, 500.0)
+    assert evaluate_depth(far[None], [gt], ["a"], scaling="none")["abs_rel"] == pytest.approx(7.0)
+    # The clamp comes after scaling: a 0.5 m prediction scaled ×200 (GT 100 m, improved GT) is cut to 80 m.
+    gt100 = np.full((8, 8), 100.0, np.float32)
+    r = evaluate_depth(np.full((1, 4, 4), 2.0, np.float32), [gt100], ["a"], crop="none")
+    assert r["scales"] == pytest.approx([200.0]) and r["abs_rel"] == pytest.approx(0.2)
+
+
+def test_sequence_scaling_uses_one_factor_per_sequence():
+    # Sequence a: frame scales 2, 4, 6 → factor 4; sequence b: one frame with scale 3 → factor 3.
+    frames = [_frame(10.0, 10.0 / s) for s in (2.0, 4.0, 6.0, 3.0)]
+    disps = np.stack([f[0] for f in frames])
+    gts = [f[1] for f in frames]
+    r = evaluate_depth(disps, gts, ["a", "a", "a", "b"], scaling="sequence")
+    assert r["scales"] == pytest.approx([2.0, 4.0, 6.0, 3.0])
+    # Scaled predictions in a: 20, 10, 6.67 m against 10 m → abs rel 1, 0, 1/3; b is exact.
+    assert r["per_sequence"]["a"]["abs_rel"] == pytest.approx((1 + 0 + 1 / 3) / 3, rel=1e-5)
+    assert r["per_sequence"]["b"]["abs_rel"] == pytest.approx(0.0, abs=1e-6)
+    assert r["abs_rel"] == pytest.approx((1 + 0 + 1 / 3 + 0) / 4, rel=1e-5)
+    assert evaluate_depth(disps, gts, ["a", "a", "a", "b"], scaling="frame")["abs_rel"] == pytest.approx(0, abs=1e-6)
+
+
+def test_scale_consistency_constant_and_linear_drift():
+    assert scale_consistency([3.0] * 5, ["s"] * 5)["scale_cv"] == 0.0
+    # Linear drift s_i = 1 + a·i, i = 0..n−1: μ = 1 + a(n−1)/2, σ = a·sqrt((n²−1)/12) (population std).
+    n, a = 20, 0.05
+    scales = 1 + a * np.arange(n)
+    expected = a * np.sqrt((n**2 - 1) / 12) / (1 + a * (n - 1) / 2)
+    r = scale_consistency(np.concatenate([scales, np.full(4, 2.0)]), ["d"] * n + ["c"] * 4)
+    assert r["per_sequence"]["d"]["scale_cv"] == pytest.approx(expected)
+    assert r["per_sequence"]["c"]["scale_cv"] == 0.0
+    assert r["scale_cv"] == pytest.approx(expected / 2)
+    pooled = np.concatenate([scales, np.full(4, 2.0)])
+    assert r["scale_cv_pooled"] == pytest.approx(pooled.std() / pooled.mean())
+    assert r["scale_std_over_median"] == pytest.approx(np.std(pooled / np.median(pooled)))
+
+
+def test_drifting_prediction_through_the_protocol():
+    n, a = 6, 0.1
+    frames = [_frame(10.0, 10.0 / (1 + a * i), shape=(40, 40)) for i in range(n)]
+    r = evaluate_depth(np.stack([f[0] for f in frames]), [f[1] for f in frames], ["s"] * n, crop="none")
+    assert r["scale_cv"] == pytest.approx(a * np.sqrt((n**2 - 1) / 12) / (1 + a * (n - 1) / 2), rel=1e-5)
+
+
+def test_frames_without_valid_gt_are_skipped_and_reported():
+    disp, gt = _frame(10.0, 5.0)
+    empty = np.zeros_like(gt)
+    r = evaluate_depth(np.stack([disp, disp]), [gt, empty], ["a", "a"])
+    assert (r["n_frames"], r["n_skipped"], r["skipped"]) == (1, 1, [1])
+    assert np.isnan(r["scales"][1]) and r["scales"][0] == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("value", [np.nan, 0.0, -1.0])
+def test_bad_disparities_name_the_input(value):
+    disp, gt = _frame(10.0, 5.0)
+    disp[3, 4] = value
+    with pytest.raises(PoseconsError, match="pred.npy.*frame 0"):
+        evaluate_depth(disp[None], [gt], ["a"], pred_name="pred.npy")
+
+
+def test_count_mismatch_names_both_inputs():
+    disp, gt = _frame(10.0, 5.0)
+    with pytest.raises(PoseconsError, match="pred.npy has 2 frames but gt.npz has 1"):
+        evaluate_depth(np.stack([disp, disp]), [gt], ["a"], pred_name="pred.npy", gt_name="gt.npz")
