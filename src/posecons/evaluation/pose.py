@@ -1,0 +1,199 @@
+"""Ego-motion metrics: the standard 5-frame snippet ATE (SPEC §10) and full-trajectory ATE / RPE.
+
+Conventions: global poses G are camera → world (KITTI pose files); the relative pose of step i is
+T_i = T_{i+1←i} = inv(G_{i+1}) · G_i, the same transform the pose net returns for the ordered pair
+(I_i, I_{i+1}). All poses are (..., 4, 4) float64 numpy arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import PoseconsError
+
+SNIPPET_LENGTH = 5  # frames per snippet in the published protocol (4 relative poses)
+KITTI_RPE_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)  # metres
+CONST_VELOCITY_MODES = ("first", "previous")
+
+
+def invert_rigid(T: np.ndarray) -> np.ndarray:
+    """Inverse [Rᵀ | −Rᵀt] of rigid transforms (..., 4, 4)."""
+    R_t = np.swapaxes(T[..., :3, :3], -1, -2)
+    inv = np.zeros_like(T)
+    inv[..., :3, :3] = R_t
+    inv[..., :3, 3] = -(R_t @ T[..., :3, 3:4])[..., 0]
+    inv[..., 3, 3] = 1.0
+    return inv
+
+
+def relative_from_global(G: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) camera → world poses → (N−1, 4, 4) steps T_i = inv(G_{i+1}) · G_i."""
+    return invert_rigid(G[1:]) @ G[:-1]
+
+
+def global_from_relative(T: np.ndarray) -> np.ndarray:
+    """(N−1, 4, 4) steps T_{i+1←i} → (N, 4, 4) camera → world poses with G_0 = I (G_{i+1} = G_i · inv(T_i))."""
+    G = np.empty((len(T) + 1, 4, 4))
+    G[0] = np.eye(4)
+    for i, step in enumerate(invert_rigid(T)):
+        G[i + 1] = G[i] @ step
+    return G
+
+
+def rotation_angle(R: np.ndarray) -> np.ndarray:
+    """Rotation angle in radians of rotation matrices (..., 3, 3)."""
+    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def snippet_positions(steps: np.ndarray) -> np.ndarray:
+    """(K, 4, 4) steps → (K+1, 3) translation columns of the running products I, T_0, T_0·T_1, …
+
+    Right multiplication, as in the published protocol (kept for comparability, although the
+    geometrically consistent chain would multiply the inverses).
+    """
+    positions = [np.zeros(3)]
+    acc = np.eye(4)
+    for step in steps:
+        acc = acc @ step
+        positions.append(acc[:3, 3].copy())
+    return np.stack(positions)
+
+
+def snippet_errors(pred_steps: np.ndarray, gt_steps: np.ndarray, length: int = SNIPPET_LENGTH) -> np.ndarray:
+    """Snippet ATE for every start frame i = 0 … N−2 over (N−1, 4, 4) steps; returns (N−1,) errors.
+
+    Each snippet uses steps i … i+length−2 (fewer at the end), the prediction is shifted to the
+    GT's first position and scaled by s = Σ(gt·pred)/Σ(pred²) (s = 0 if pred is all zero);
+    the error is sqrt(Σ‖s·pred − gt‖²) / n_positions (not an RMSE).
+    """
+    if pred_steps.shape != gt_steps.shape:
+        raise PoseconsError(f"{len(pred_steps)} predicted steps but {len(gt_steps)} ground-truth steps")
+    errors = np.empty(len(gt_steps))
+    for i in range(len(gt_steps)):
+        gt = snippet_positions(gt_steps[i : i + length - 1])
+        pred = snippet_positions(pred_steps[i : i + length - 1])
+        pred = pred + (gt[0] - pred[0])
+        norm = np.sum(pred**2)
+        scale = np.sum(gt * pred) / norm if norm > 0 else 0.0
+        errors[i] = np.sqrt(np.sum((scale * pred - gt) ** 2)) / len(gt)
+    return errors
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> tuple[float, np.ndarray, np.ndarray]:
+    """Least-squares similarity (s, R (3, 3), t (3,)) minimising Σ‖dst − (s·R·src + t)‖² (Umeyama 1991).
+
+    src, dst: (N, 3) corresponding points. With ``with_scale=False`` s = 1 (SE(3) alignment).
+    """
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 2:
+        raise PoseconsError(f"alignment needs two matching (N ≥ 2, 3) point sets, got {src.shape} and {dst.shape}")
+    mu_src, mu_dst = src.mean(0), dst.mean(0)
+    a, b = src - mu_src, dst - mu_dst
+    U, D, Vt = np.linalg.svd(b.T @ a / len(src))
+    S = np.eye(3)
+    S[2, 2] = np.sign(np.linalg.det(U) * np.linalg.det(Vt)) or 1.0  # keep a proper rotation
+    R = U @ S @ Vt
+    var_src = np.mean(np.sum(a**2, axis=1))
+    scale = float(np.trace(np.diag(D) @ S) / var_src) if with_scale and var_src > 0 else 1.0
+    return scale, R, mu_dst - scale * R @ mu_src
+
+
+def apply_sim3(G: np.ndarray, scale: float, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Map (N, 4, 4) camera → world poses into another world frame: x' = s·R·x + t (rotations R·R_i)."""
+    out = G.copy()
+    out[:, :3, :3] = R @ G[:, :3, :3]
+    out[:, :3, 3] = scale * G[:, :3, 3] @ R.T + t
+    return out
+
+
+def align_trajectory(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, float]:
+    """Sim(3)-align (N, 4, 4) predicted poses to GT on their positions; returns (aligned poses, scale)."""
+    scale, R, t = umeyama(pred[:, :3, 3], gt[:, :3, 3])
+    return apply_sim3(pred, scale, R, t), scale
+
+
+def ate_rmse(pred_aligned: np.ndarray, gt: np.ndarray) -> float:
+    """RMSE (m) of the position errors of aligned (N, 4, 4) poses."""
+    return float(np.sqrt(np.mean(np.sum((pred_aligned[:, :3, 3] - gt[:, :3, 3]) ** 2, axis=1))))
+
+
+def rpe_lengths(path_length: float) -> tuple[list[float], int]:
+    """Segment lengths (m) and first-frame step for RPE on a trajectory of this path length.
+
+    KITTI's 100 … 800 m (those shorter than the path) every 10th frame; a path under 100 m
+    (short synthetic sequences) uses 10 %, 20 %, … 80 % of its length from every frame instead.
+    """
+    if path_length >= KITTI_RPE_LENGTHS[0]:
+        return [L for L in KITTI_RPE_LENGTHS if L < path_length], 10
+    return [path_length * k / 10 for k in range(1, 9)], 1
+
+
+def relative_pose_error(pred: np.ndarray, gt: np.ndarray) -> dict:
+    """KITTI-style RPE of (N, 4, 4) (already scale-aligned) poses against GT over fixed path lengths.
+
+    For each first frame and length L, the last frame is the first one whose GT path distance
+    exceeds L; the error E = inv(ΔP)·ΔG of the two relative motions gives translation ‖t_E‖/L
+    and rotation angle(E)/L. Returns ``rpe_trans`` (%), ``rpe_rot`` (deg/m), the lengths used and
+    the segment count (NaN metrics if the GT never moves).
+    """
+    dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1))])
+    lengths, step = rpe_lengths(float(dist[-1]))
+    trans, rot = [], []
+    for L in lengths if dist[-1] > 0 else []:
+        for first in range(0, len(gt), step):
+            last = int(np.searchsorted(dist, dist[first] + L, side="right"))
+            if last >= len(gt):
+                break
+            err = invert_rigid(invert_rigid(pred[first]) @ pred[last]) @ (invert_rigid(gt[first]) @ gt[last])
+            trans.append(np.linalg.norm(err[:3, 3]) / L)
+            rot.append(np.degrees(rotation_angle(err[:3, :3])) / L)
+    return {
+        "rpe_trans": float(100 * np.mean(trans)) if trans else float("nan"),
+        "rpe_rot": float(np.mean(rot)) if rot else float("nan"),
+        "rpe_lengths": [float(L) for L in lengths],
+        "rpe_n_segments": len(trans),
+    }
+
+
+def constant_velocity_steps(gt_steps: np.ndarray, mode: str = "first") -> np.ndarray:
+    """A motion model with no image input, (N−1, 4, 4): every step equals the first GT step
+    (``first``), or the previous GT step (``previous``, the first step is GT's own)."""
+    if mode == "first":
+        return np.broadcast_to(gt_steps[0], gt_steps.shape).copy()
+    if mode == "previous":
+        return np.concatenate([gt_steps[:1], gt_steps[:-1]])
+    raise PoseconsError(f"unknown constant-velocity mode {mode!r}; expected one of {CONST_VELOCITY_MODES}")
+
+
+def pose_metrics(pred_global: np.ndarray, gt_global: np.ndarray) -> dict:
+    """All pose metrics of (N, 4, 4) predicted against (N, 4, 4) GT camera → world poses.
+
+    The snippet ATE uses the steps of both trajectories; full ATE and RPE use the predicted
+    trajectory after Sim(3) alignment to GT, which absorbs the unknown monocular scale.
+    """
+    errors = snippet_errors(relative_from_global(pred_global), relative_from_global(gt_global))
+    aligned, scale = align_trajectory(pred_global, gt_global)
+    return {
+        "ate_mean": float(errors.mean()),
+        "ate_std": float(errors.std()),
+        "n_snippets": int(errors.size),
+        "ate_full_rmse": ate_rmse(aligned, gt_global),
+        "sim3_scale": scale,
+        **relative_pose_error(aligned, gt_global),
+    }
+
+
+def evaluate_pose(pred_global: np.ndarray, gt_global: np.ndarray, const_velocity: str = "first") -> dict:
+    """:func:`pose_metrics` of (N, 4, 4) predicted camera → world poses (e.g. chained pose-net steps,
+    :func:`global_from_relative`) plus the same metrics for a constant-velocity baseline
+    (``const_velocity`` sub-dict), which shows how much of a score needs no images at all."""
+    if len(gt_global) < 2:
+        raise PoseconsError(f"pose evaluation needs at least 2 ground-truth poses, got {len(gt_global)}")
+    if len(pred_global) != len(gt_global):
+        raise PoseconsError(f"{len(pred_global)} predicted poses but {len(gt_global)} ground-truth poses")
+    baseline = global_from_relative(constant_velocity_steps(relative_from_global(gt_global), const_velocity))
+    return {
+        **pose_metrics(pred_global, gt_global),
+        "n_frames": len(gt_global),
+        "const_velocity": {"mode": const_velocity, **pose_metrics(baseline, gt_global)},
+    }

@@ -1,0 +1,130 @@
+"""Pose metrics: snippet ATE (SPEC §10), Sim(3) alignment, RPE and the constant-velocity baseline."""
+
+import numpy as np
+import pytest
+
+from posecons.errors import PoseconsError
+from posecons.evaluation.pose import (apply_sim3, constant_velocity_steps, evaluate_pose, global_from_relative,
+                                      invert_rigid, relative_from_global, relative_pose_error, snippet_errors,
+                                      umeyama)
+from posecons.evaluation.trajectory_io import read_kitti_poses
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def _pose(R: np.ndarray, t) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+def _drive(n: int, seed: int = 0) -> np.ndarray:
+    """(n, 4, 4) camera → world poses of a car driving forward along a gentle curve, 1 m a frame."""
+    rng = np.random.default_rng(seed)
+    steps = [_pose(_rotation([0, 1, 0], 0.02 + 0.01 * rng.standard_normal()), [0.01, 0.0, -1.0]) for _ in range(n - 1)]
+    return global_from_relative(np.stack(steps))
+
+
+def test_relative_and_global_round_trip():
+    G = _drive(12)
+    assert np.allclose(global_from_relative(relative_from_global(G)), G)
+    # T_i maps points of camera i into camera i+1: G_{i+1}·T_i = G_i.
+    T = relative_from_global(G)
+    assert np.allclose(G[1:] @ T, G[:-1])
+
+
+def test_snippet_ate_zero_for_perfect_and_scaled_predictions():
+    gt = relative_from_global(_drive(30))
+    assert np.allclose(snippet_errors(gt, gt), 0.0)
+    # One arbitrary scale per snippet (here per step, constant within each snippet window) is absorbed.
+    for scale in (0.1, 3.7):
+        scaled = gt.copy()
+        scaled[:, :3, 3] *= scale
+        assert np.allclose(snippet_errors(scaled, gt), 0.0, atol=1e-12)
+
+
+def test_snippet_ate_by_hand():
+    # GT moves 1 m along z per step; the prediction moves along z then sideways by 1 in its last step.
+    gt = np.stack([_pose(np.eye(3), [0, 0, 1])] * 4)
+    pred = np.stack([_pose(np.eye(3), [0, 0, 1])] * 3 + [_pose(np.eye(3), [1, 0, 0])])
+    # Positions: gt z = 0..4; pred (0,0,0),(0,0,1),(0,0,2),(0,0,3),(1,0,3).
+    # s = Σgt·pred / Σpred² = (1+4+9+12)/(1+4+9+10) = 26/24.
+    s = 26 / 24
+    residual = (s - 1) ** 2 * (1 + 4 + 9) + (s * 1) ** 2 + (3 * s - 4) ** 2
+    errors = snippet_errors(pred, gt)
+    assert errors[0] == pytest.approx(np.sqrt(residual) / 5)
+    assert len(errors) == 4  # start frames 0 … N−2, shorter snippets at the end
+    assert errors[3] == pytest.approx(np.sqrt(1.0) / 2)  # lone sideways step: s = 0, error |gt| / 2
+
+
+def test_snippet_ate_on_real_odometry_09(kitti_dir):
+    gt_global = read_kitti_poses(kitti_dir / "odometry" / "poses" / "09.txt")
+    assert gt_global.shape == (1591, 4, 4)
+    gt = relative_from_global(gt_global)
+    rng = np.random.default_rng(0)
+    noisy = gt.copy()
+    noisy[:, :3, 3] += 0.02 * rng.standard_normal((len(gt), 3))
+    noisy[:, :3, 3] *= 0.3  # monocular: unknown global scale
+    r = evaluate_pose(global_from_relative(noisy), gt_global)
+    assert r["n_snippets"] == 1590
+    assert 0.005 < r["ate_mean"] < 0.05  # noise of 2 cm per step gives ~1–2 cm snippet errors
+    exact = evaluate_pose(gt_global, gt_global)
+    assert exact["ate_mean"] == pytest.approx(0.0, abs=1e-9) and exact["ate_full_rmse"] == pytest.approx(0.0, abs=1e-9)
+    assert r["sim3_scale"] == pytest.approx(1 / 0.3, rel=0.05)
+    assert r["rpe_lengths"] == [100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0]
+    # A constant-velocity model with no images scores a comparable snippet ATE, but not on the full trajectory.
+    cv = r["const_velocity"]
+    assert cv["ate_mean"] < 0.1 and cv["ate_full_rmse"] > 20 * r["ate_full_rmse"]
+
+
+def test_umeyama_recovers_a_similarity():
+    rng = np.random.default_rng(1)
+    src = rng.standard_normal((50, 3))
+    R = _rotation([1, 2, 3], 0.7)
+    s, t = 2.5, np.array([1.0, -2.0, 0.5])
+    dst = s * src @ R.T + t
+    s_hat, R_hat, t_hat = umeyama(src, dst)
+    assert s_hat == pytest.approx(s) and np.allclose(R_hat, R) and np.allclose(t_hat, t)
+    poses = np.stack([_pose(np.eye(3), p) for p in src])
+    assert np.allclose(apply_sim3(poses, s, R, t)[:, :3, 3], dst)
+
+
+def test_full_metrics_on_a_short_sequence():
+    G = _drive(100)  # ~99 m: shorter than KITTI's 100 m segments
+    r = evaluate_pose(G, G)
+    assert r["ate_full_rmse"] == pytest.approx(0.0, abs=1e-9)
+    assert r["rpe_trans"] == pytest.approx(0.0, abs=1e-9) and r["rpe_rot"] == pytest.approx(0.0, abs=1e-9)
+    assert r["rpe_lengths"] == pytest.approx([99.0 * k / 10 for k in range(1, 9)], rel=1e-3)
+    assert r["rpe_n_segments"] > 100
+
+
+def test_rpe_of_a_known_error():
+    # Straight drive, 1 m a frame, 60 frames (59 m → segment lengths 5.9 k m); the prediction is 10 % too long.
+    G = global_from_relative(np.stack([_pose(np.eye(3), [0, 0, -1.0])] * 59))
+    stretched = G.copy()
+    stretched[:, :3, 3] *= 1.1
+    r = relative_pose_error(stretched, G)
+    # Each segment ends at the first frame beyond L, floor(L) + 1 frames on: error 0.1·(floor(L) + 1) / L.
+    expected = [0.1 * (np.floor(L) + 1) / L for L in r["rpe_lengths"] for first in range(60)
+                if first + np.floor(L) + 1 < 60]
+    assert r["rpe_n_segments"] == len(expected)
+    assert r["rpe_trans"] == pytest.approx(100 * np.mean(expected))
+    assert r["rpe_rot"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_constant_velocity_steps():
+    gt = relative_from_global(_drive(6))
+    assert np.allclose(constant_velocity_steps(gt, "first"), gt[0])
+    prev = constant_velocity_steps(gt, "previous")
+    assert np.allclose(prev[0], gt[0]) and np.allclose(prev[1:], gt[:-1])
+
+
+def test_count_mismatch():
+    G = _drive(10)
+    with pytest.raises(PoseconsError, match="9 predicted poses but 10 ground-truth poses"):
+        evaluate_pose(G[:-1], G)
+    assert np.allclose(invert_rigid(G) @ G, np.eye(4))

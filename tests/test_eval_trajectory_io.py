@@ -1,0 +1,57 @@
+"""KITTI and TUM trajectory files: round trips, quaternion conventions and bad input."""
+
+import numpy as np
+import pytest
+
+from posecons.errors import PoseconsError
+from posecons.evaluation.trajectory_io import (quaternion_to_rotation, read_kitti_poses, read_times, read_tum,
+                                               rotation_to_quaternion, write_kitti_poses, write_tum)
+
+
+def _random_poses(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    q = rng.standard_normal((n, 4))
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, :3, :3] = quaternion_to_rotation(q)
+    poses[:, :3, 3] = rng.standard_normal((n, 3)) * 50
+    return poses
+
+
+def test_quaternion_convention_and_round_trip():
+    # 90° about z: q = (0, 0, sin 45°, cos 45°) in (x, y, z, w) order.
+    Rz = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    assert np.allclose(rotation_to_quaternion(Rz[None]), [[0, 0, np.sqrt(0.5), np.sqrt(0.5)]])
+    # Includes 180° rotations, where w = 0 and the trace-based formula alone would divide by zero.
+    R = np.concatenate([_random_poses(200)[:, :3, :3], np.diag([1.0, -1, -1])[None], np.diag([-1.0, -1, 1])[None]])
+    assert np.allclose(quaternion_to_rotation(rotation_to_quaternion(R)), R, atol=1e-12)
+
+
+def test_kitti_round_trip_and_real_file(tmp_path, kitti_dir):
+    poses = _random_poses(20)
+    write_kitti_poses(tmp_path / "p.txt", poses)
+    assert np.allclose(read_kitti_poses(tmp_path / "p.txt"), poses, atol=1e-7)
+    real = read_kitti_poses(kitti_dir / "odometry" / "poses" / "09.txt")
+    assert real.shape == (1591, 4, 4) and np.allclose(real[0], np.eye(4), atol=1e-9)
+
+
+def test_tum_round_trip_with_times(tmp_path, kitti_dir):
+    poses = _random_poses(30)
+    times = read_times(kitti_dir / "odometry" / "sequences" / "00" / "times.txt")[:30]
+    assert times[1] == pytest.approx(0.1037359)
+    write_tum(tmp_path / "t.txt", poses, times)
+    t, back = read_tum(tmp_path / "t.txt")
+    assert np.allclose(t, times) and np.allclose(back, poses, atol=1e-7)
+    write_tum(tmp_path / "d.txt", poses)  # default timestamps: frame / 10 Hz
+    assert np.allclose(read_tum(tmp_path / "d.txt")[0], np.arange(30) / 10)
+
+
+def test_bad_files_name_file_and_line(tmp_path):
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n")
+    with pytest.raises(PoseconsError, match=r"bad\.txt:2: expected 12 numbers per line.*got 11"):
+        read_kitti_poses(bad)
+    bad.write_text("1 0 0 0 0 1 0 0 0 0 1 nan\n")
+    with pytest.raises(PoseconsError, match="bad.txt: NaN"):
+        read_kitti_poses(bad)
+    with pytest.raises(PoseconsError, match="missing.txt: KITTI poses file not found"):
+        read_kitti_poses(tmp_path / "missing.txt")
