@@ -48,10 +48,10 @@ def test_tum_round_trip_with_times(tmp_path, kitti_dir):
 def test_bad_files_name_file_and_line(tmp_path):
     bad = tmp_path / "bad.txt"
     bad.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n")
-    with pytest.raises(PoseconsError, match=r"bad\.txt:2: expected 12 numbers per line.*got 11"):
+    with pytest.raises(PoseconsError, match=r"bad\.txt:2: expected 12 numbers"):
         read_kitti_poses(bad)
     bad.write_text("1 0 0 0 0 1 0 0 0 0 1 nan\n")
     with pytest.raises(PoseconsError, match="bad.txt: NaN"):
         read_kitti_poses(bad)
-    with pytest.raises(PoseconsError, match="missing.txt: KITTI poses file not found"):
+    with pytest.raises(PoseconsError, match="missing.txt: pose file not found"):
         read_kitti_poses(tmp_path / "missing.txt")

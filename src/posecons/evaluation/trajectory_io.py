@@ -7,7 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.kitti_odometry import read_poses, write_poses
 from ..errors import PoseconsError
+
+write_kitti_poses = write_poses  # the data layer's KITTI writer (12 numbers a line)
 
 KITTI_RATE_HZ = 10.0  # timestamps (frame index / 10 Hz) when no times file is given
 
@@ -37,16 +40,13 @@ def _read_rows(path: str | Path, columns: int, what: str) -> np.ndarray:
 
 
 def read_kitti_poses(path: str | Path) -> np.ndarray:
-    """(N, 4, 4) camera → world poses from a KITTI pose file."""
-    rows = _read_rows(path, 12, "KITTI poses")
-    poses = np.tile(np.eye(4), (len(rows), 1, 1))
-    poses[:, :3, :] = rows.reshape(-1, 3, 4)
+    """(N ≥ 1, 4, 4) camera → world poses from a KITTI pose file; NaN/inf values are rejected."""
+    poses = read_poses(Path(path))
+    if len(poses) == 0:
+        raise PoseconsError(f"{path}: no KITTI poses found")
+    if not np.isfinite(poses).all():
+        raise PoseconsError(f"{path}: NaN or infinite values in KITTI poses")
     return poses
-
-
-def write_kitti_poses(path: str | Path, poses: np.ndarray) -> None:
-    """Write (N, 4, 4) poses as KITTI lines (first three rows, row-major)."""
-    np.savetxt(path, poses[:, :3, :].reshape(len(poses), 12), fmt="%.9e")
 
 
 def read_times(path: str | Path) -> np.ndarray:

@@ -1,0 +1,95 @@
+"""Evaluation figures (PNG, matplotlib Agg): frame scales per sequence, scale over time for the
+least consistent sequences (the paper's Figure 1), the per-frame abs rel histogram, and the
+top view of a trajectory."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; never needs a display
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _save(fig: plt.Figure, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _short(name: str) -> str:
+    """'2011_09_26/2011_09_26_drive_0002_sync' → '09_26_0002' for axis labels."""
+    base = name.rstrip("/").split("/")[-1]
+    parts = base.split("_")
+    return f"{parts[1]}_{parts[2]}_{parts[4]}" if len(parts) >= 5 and parts[3] == "drive" else base
+
+
+def _by_sequence(scales: Sequence[float], sequences: Sequence[str]) -> dict[str, np.ndarray]:
+    """Indices of the frames with a finite scale, per sequence, in first-seen order."""
+    scales = np.asarray(scales, dtype=np.float64)
+    names = np.asarray(sequences)
+    groups = {name: np.flatnonzero((names == name) & np.isfinite(scales)) for name in dict.fromkeys(sequences)}
+    return {name: idx for name, idx in groups.items() if idx.size}
+
+
+def plot_scale_boxplot(scales: Sequence[float], sequences: Sequence[str], path: str | Path) -> Path:
+    """Box plot of the per-frame median scales (N,) of each sequence."""
+    scales = np.asarray(scales, dtype=np.float64)
+    groups = _by_sequence(scales, sequences)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.35 * len(groups) + 2), 4))
+    ax.boxplot([scales[idx] for idx in groups.values()])
+    ax.set_xticks(range(1, len(groups) + 1), [_short(n) for n in groups], rotation=90, fontsize=7)
+    ax.set_ylabel("median scale  median(gt) / median(pred)")
+    ax.set_title("Per-frame scale by sequence")
+    return _save(fig, path)
+
+
+def plot_scale_over_time(
+    scales: Sequence[float], sequences: Sequence[str], frames: Sequence[int], path: str | Path, count: int = 5
+) -> Path:
+    """Scale against frame number for the ``count`` sequences with the largest σ/μ."""
+    scales = np.asarray(scales, dtype=np.float64)
+    frames = np.asarray(frames)
+    groups = _by_sequence(scales, sequences)
+    cv = {name: scales[idx].std() / scales[idx].mean() for name, idx in groups.items()}
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name in sorted(cv, key=cv.get, reverse=True)[:count]:
+        idx = groups[name][np.argsort(frames[groups[name]], kind="stable")]
+        ax.plot(frames[idx], scales[idx], marker=".", label=f"{_short(name)}  σ/μ={cv[name]:.3f}")
+    ax.set_xlabel("frame")
+    ax.set_ylabel("median scale")
+    ax.set_title(f"Scale over time, the {min(count, len(cv))} least consistent sequences")
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_error_histogram(abs_rel: Sequence[float], path: str | Path, bins: int = 40) -> Path:
+    """Histogram of per-frame abs rel (NaN entries, i.e. skipped frames, are left out)."""
+    values = np.asarray(abs_rel, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.hist(values, bins=bins)
+    ax.axvline(values.mean(), color="k", linestyle="--", label=f"mean {values.mean():.3f}")
+    ax.set_xlabel("abs rel (per frame)")
+    ax.set_ylabel("frames")
+    ax.legend()
+    return _save(fig, path)
+
+
+def plot_trajectory_topview(gt: np.ndarray, pred: np.ndarray, path: str | Path, label: str = "prediction") -> Path:
+    """Top view (x right, z forward) of (N, 4, 4) camera → world GT and predicted poses."""
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.plot(gt[:, 0, 3], gt[:, 2, 3], "k-", label="ground truth")
+    ax.plot(pred[:, 0, 3], pred[:, 2, 3], "-", label=label)
+    ax.plot(gt[0, 0, 3], gt[0, 2, 3], "ko")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend()
+    return _save(fig, path)

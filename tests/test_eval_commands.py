@@ -1,0 +1,112 @@
+"""End-to-end: `posecons evaluate-depth`, `evaluate-pose` and `compare` on small files written here."""
+
+import json
+
+import numpy as np
+import pytest
+
+from posecons.cli import main
+from posecons.evaluation.trajectory_io import read_kitti_poses, read_tum, write_kitti_poses
+
+DRIVE = "2011_09_26/2011_09_26_drive_0002_sync"
+DEPTH_KEYS = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3", "scaling", "scales", "scale_cv",
+              "scale_cv_pooled", "scale_std_over_median", "per_sequence", "n_frames", "n_skipped", "skipped"}
+POSE_KEYS = {"ate_mean", "ate_std", "n_snippets", "ate_full_rmse", "rpe_trans", "rpe_rot", "const_velocity"}
+
+
+def _write_gt(path, maps, lines):
+    arrays = {f"{i:06d}": m.astype(np.float32) for i, m in enumerate(maps)}
+    np.savez(path, lines=np.array(lines, dtype=np.str_), **arrays)
+
+
+@pytest.fixture
+def depth_files(tmp_path):
+    """Three frames over two sequences and two GT sizes; the last frame has no valid GT."""
+    rng = np.random.default_rng(0)
+    maps = [rng.uniform(5, 60, (40, 124)), rng.uniform(5, 60, (37, 122)), np.zeros((40, 124))]
+    lines = [f"{DRIVE} 0000000001 l", "2011_09_26/2011_09_26_drive_0009_sync 0000000005 l", f"{DRIVE} 0000000002 l"]
+    _write_gt(tmp_path / "gt.npz", maps, lines)
+    np.save(tmp_path / "pred.npy", rng.uniform(0.02, 0.5, (3, 16, 48)).astype(np.float32))
+    return tmp_path
+
+
+def test_evaluate_depth_from_predictions(depth_files, capsys):
+    out = depth_files
+    rc = main(["evaluate-depth", "--pred-disps", str(out / "pred.npy"), "--gt", str(out / "gt.npz"),
+               "--json", str(out / "depth.json"), "--plots", str(out / "plots")])
+    assert rc == 0
+    result = json.loads((out / "depth.json").read_text())
+    assert DEPTH_KEYS <= set(result)
+    assert (result["n_frames"], result["n_skipped"], result["skipped"]) == (2, 1, [2])
+    assert result["skipped_lines"] == [f"{DRIVE} 2 l"] and result["scales"][2] is None
+    assert set(result["per_sequence"]) == {DRIVE, "2011_09_26/2011_09_26_drive_0009_sync"}
+    assert result["per_sequence"][DRIVE]["n"] == 1
+    printed = capsys.readouterr().out
+    assert "| σ/μ | Abs Rel |" in printed and f"{result['abs_rel']:.3f}" in printed
+    for name in ("scale_boxplot.png", "scale_over_time.png", "abs_rel_histogram.png"):
+        assert (out / "plots" / name).stat().st_size > 1000
+
+
+def test_evaluate_depth_bad_input_names_the_file(depth_files, capsys):
+    out = depth_files
+    np.save(out / "short.npy", np.full((2, 16, 48), 0.1, np.float32))
+    assert main(["evaluate-depth", "--pred-disps", str(out / "short.npy"), "--gt", str(out / "gt.npz")]) == 2
+    assert "short.npy has 2 frames but" in capsys.readouterr().err
+    nan = np.full((3, 16, 48), 0.1, np.float32)
+    nan[1, 0, 0] = np.nan
+    np.save(out / "nan.npy", nan)
+    assert main(["evaluate-depth", "--pred-disps", str(out / "nan.npy"), "--gt", str(out / "gt.npz")]) == 2
+    assert "nan.npy: 1 NaN/inf or non-positive" in capsys.readouterr().err
+
+
+@pytest.fixture
+def pose_files(tmp_path, kitti_dir):
+    """The first 120 poses of odometry 09 and a noisy prediction at another scale."""
+    gt = read_kitti_poses(kitti_dir / "odometry" / "poses" / "09.txt")[:120]
+    pred = gt.copy()
+    pred[:, :3, 3] = 0.5 * pred[:, :3, 3] + np.random.default_rng(0).normal(0, 0.05, (120, 3))
+    write_kitti_poses(tmp_path / "gt.txt", gt)
+    write_kitti_poses(tmp_path / "pred.txt", pred)
+    return tmp_path
+
+
+def test_evaluate_pose_from_a_trajectory_file(pose_files, kitti_dir):
+    out = pose_files
+    rc = main(["evaluate-pose", "--pred-poses", str(out / "pred.txt"), "--gt-poses", str(out / "gt.txt"),
+               "--json", str(out / "pose.json"), "--out-dir", str(out / "traj")])
+    assert rc == 0
+    result = json.loads((out / "pose.json").read_text())
+    assert POSE_KEYS <= set(result) and POSE_KEYS - {"const_velocity"} <= set(result["const_velocity"])
+    assert result["n_snippets"] == 119 and result["sim3_scale"] == pytest.approx(2.0, rel=0.05)
+    times, written = read_tum(out / "traj" / "trajectory_tum.txt")
+    assert np.allclose(times, np.arange(120) / 10)
+    assert np.allclose(written, read_kitti_poses(out / "traj" / "trajectory_kitti.txt"), atol=1e-6)
+    assert (out / "traj" / "trajectory.png").stat().st_size > 1000
+
+
+def test_evaluate_pose_bad_input(pose_files, capsys):
+    out = pose_files
+    lines = (out / "pred.txt").read_text().splitlines()
+    (out / "short.txt").write_text("\n".join(lines[:-1]) + "\n")
+    assert main(["evaluate-pose", "--pred-poses", str(out / "short.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
+    assert "short.txt has 119 poses but" in capsys.readouterr().err
+    (out / "cols.txt").write_text("\n".join(lines[:5] + [lines[5] + " 1.0"] + lines[6:]) + "\n")
+    assert main(["evaluate-pose", "--pred-poses", str(out / "cols.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
+    assert "cols.txt:6: expected 12 numbers" in capsys.readouterr().err
+
+
+def test_compare_bolds_the_best(tmp_path, capsys):
+    base = {"scale_cv": 0.08, "abs_rel": 0.115, "sq_rel": 0.9, "rmse": 4.8, "rmse_log": 0.19,
+            "a1": 0.877, "a2": 0.959, "a3": 0.981}
+    better = dict(base, scale_cv=0.05, abs_rel=0.112, a1=0.880)
+    (tmp_path / "base.json").write_text(json.dumps(base))
+    (tmp_path / "run" / "eval").mkdir(parents=True)
+    (tmp_path / "run" / "eval" / "depth.json").write_text(json.dumps(better))
+    rc = main(["compare", str(tmp_path / "base.json"), str(tmp_path / "run"), "--out", str(tmp_path / "t.md")])
+    assert rc == 0
+    table = (tmp_path / "t.md").read_text().splitlines()
+    assert table[0].startswith("| Method | σ/μ | Abs Rel | Sq Rel | RMSE | RMSE log | δ<1.25")
+    assert table[2] == "| base | 0.080 | 0.115 | **0.900** | **4.800** | **0.190** | 0.877 | **0.959** | **0.981** |"
+    assert table[3] == "| run | **0.050** | **0.112** | **0.900** | **4.800** | **0.190** | **0.880** | **0.959** | **0.981** |"
+    assert capsys.readouterr().out.splitlines() == table
+    assert main(["compare", str(tmp_path / "base.json"), "--names", "a", "b"]) == 2
