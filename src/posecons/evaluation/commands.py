@@ -20,7 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("evaluate-depth", help="KITTI depth metrics and scale consistency (SPEC §9)",
                               description="Evaluate predicted disparities (or a model) against ground-truth depth.")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--pred-disps", type=Path, metavar="P.npy", help="(N, h, w) float32 scaled disparities, split order")
+    src.add_argument("--pred-disps", type=Path, metavar="P.npy",
+                     help="(N, h, w) float32 scaled disparities, split order")
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
     p.add_argument("--gt", type=Path, metavar="GT.npz", help="exported ground truth (required with --pred-disps; "
                    "with --checkpoint it is exported on the fly when missing)")
@@ -175,7 +176,8 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         _require(args, "data_path", "sequence")
         paths = list_sequence_frames(args.data_path, args.sequence)
         if len(paths) != len(gt):
-            raise PoseconsError(f"{len(paths)} images in sequence {args.sequence} but {len(gt)} poses in {args.gt_poses}")
+            raise PoseconsError(f"{len(paths)} images in sequence {args.sequence} but "
+                                f"{len(gt)} poses in {args.gt_poses}")
         model, config, device = _load_model(args)
         steps = predict_steps(model, paths, config.model.height, config.model.width, args.batch_size, device)
         estimate, source = pose.global_from_relative(steps), str(args.checkpoint)
