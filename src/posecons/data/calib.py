@@ -1,0 +1,115 @@
+"""KITTI calibration files: ``key: values`` lines (raw ``calib_*.txt`` and odometry ``calib.txt``).
+
+Conventions (KITTI raw): ``[R|T]`` of ``calib_velo_to_cam`` maps Velodyne points into the unrectified
+camera-0 frame, ``R_rect_00`` rotates them into the rectified camera-0 frame, and ``P_rect_0k``
+projects rectified camera-0 points into camera k's image (its last column holds camera k's offset).
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Union
+
+import numpy as np
+
+from ..errors import PoseconsError
+from .io import require_file
+
+CalibValue = Union[np.ndarray, str]
+KITTI_FIXED_K = np.array([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], dtype=np.float32)
+"""KITTI's customary normalised intrinsics (row 0 / W, row 1 / H), used when calibration is off."""
+
+
+def parse_calib_text(text: str, source: str) -> dict[str, CalibValue]:
+    """Parse ``key: values`` lines. Numeric values become float64 arrays; others stay text."""
+    out: dict[str, CalibValue] = {}
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        key, sep, value = line.partition(":")
+        key = key.strip()
+        if not sep or not key or " " in key:
+            raise PoseconsError(f"{source}:{number}: expected 'key: values', got {line.strip()[:60]!r}")
+        try:
+            out[key] = np.array([float(v) for v in value.split()], dtype=np.float64)
+        except ValueError:
+            if any(c.isdigit() for c in value) and _looks_numeric(value):
+                raise PoseconsError(f"{source}:{number}: bad number in {key!r}: {value.strip()[:60]!r}") from None
+            out[key] = value.strip()
+    return out
+
+
+def _looks_numeric(value: str) -> bool:
+    """True when most tokens are numbers, i.e. a damaged numeric line rather than free text."""
+    tokens = value.split()
+    numeric = 0
+    for tok in tokens:
+        try:
+            float(tok)
+            numeric += 1
+        except ValueError:
+            pass
+    return numeric > 0 and numeric >= len(tokens) / 2
+
+
+def read_calib_file(path: Path) -> dict[str, CalibValue]:
+    """Read a KITTI calibration file into ``{key: array | text}``."""
+    path = require_file(Path(path), "calibration file")
+    return parse_calib_text(path.read_text(), str(path))
+
+
+def calib_matrix(calib: dict[str, CalibValue], key: str, shape: tuple[int, ...], source: Path) -> np.ndarray:
+    """Fetch ``calib[key]`` reshaped to ``shape``, with an error naming the file when absent or wrong."""
+    value = calib.get(key)
+    if not isinstance(value, np.ndarray) or value.size != int(np.prod(shape)):
+        raise PoseconsError(f"{source}: missing or malformed {key!r} (expected {int(np.prod(shape))} numbers)")
+    return value.reshape(shape)
+
+
+def rigid(calib: dict[str, CalibValue], source: Path) -> np.ndarray:
+    """The (4, 4) transform ``[R|T]`` of a ``calib_velo_to_cam`` / ``calib_imu_to_velo`` file."""
+    out = np.eye(4)
+    out[:3, :3] = calib_matrix(calib, "R", (3, 3), source)
+    out[:3, 3] = calib_matrix(calib, "T", (3,), source)
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def cam_to_cam(date_dir: Path) -> dict[str, CalibValue]:
+    """``<date>/calib_cam_to_cam.txt`` of a raw date folder, cached per folder."""
+    return read_calib_file(Path(date_dir) / "calib_cam_to_cam.txt")
+
+
+def raw_projection(date_dir: Path, cam: int = 2) -> tuple[np.ndarray, tuple[int, int]]:
+    """``P_rect_0<cam>`` (3, 4) and the rectified image size (width, height) from ``S_rect_0<cam>``."""
+    source = Path(date_dir) / "calib_cam_to_cam.txt"
+    calib = cam_to_cam(Path(date_dir))
+    p_rect = calib_matrix(calib, f"P_rect_0{cam}", (3, 4), source)
+    width, height = calib_matrix(calib, f"S_rect_0{cam}", (2,), source)
+    return p_rect, (int(round(width)), int(round(height)))
+
+
+def normalised_k(p_rect: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(3, 3) float32 intrinsics normalised by image size (row 0 / W, row 1 / H)."""
+    k = np.array(p_rect[:3, :3], dtype=np.float64)
+    k[0] /= width
+    k[1] /= height
+    return k.astype(np.float32)
+
+
+def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
+    """Normalised (3, 3) K of rectified camera ``cam`` of a raw date folder."""
+    p_rect, (width, height) = raw_projection(date_dir, cam)
+    return normalised_k(p_rect, width, height)
+
+
+def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:
+    """(3, 4) P_velo→img = P_rect_0<cam> · R_rect_00 · [R|T]_velo→cam (SPEC §8)."""
+    date_dir = Path(date_dir)
+    source = date_dir / "calib_cam_to_cam.txt"
+    p_rect, _ = raw_projection(date_dir, cam)
+    r_rect = np.eye(4)
+    r_rect[:3, :3] = calib_matrix(cam_to_cam(date_dir), "R_rect_00", (3, 3), source)
+    velo_file = date_dir / "calib_velo_to_cam.txt"
+    return p_rect @ r_rect @ rigid(read_calib_file(velo_file), velo_file)

@@ -1,0 +1,120 @@
+"""The shared training-sample logic of the KITTI raw and odometry datasets.
+
+Sample contract (the model relies on it):
+    ``frames``     float32 (F, 3, H, W) in [0, 1], in ``frame_ids`` order, flipped if drawn;
+    ``intrinsics`` float32 (3, 3) K normalised by image size, cx → 1 − cx when flipped;
+    ``color_aug``  float32 (4,) jitter factors (b, c, s, h), (1, 1, 1, 0) when not drawn;
+    ``index`` int, ``folder`` str, ``frame`` int, ``side`` str.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from PIL import Image
+from torch.utils.data import Dataset
+
+from ..errors import PoseconsError
+from .calib import KITTI_FIXED_K
+from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
+from .io import load_rgb
+from .splits import SplitLine, SplitSource, read_split
+
+
+class FrameDataset(Dataset):
+    """Base class: subclasses say where a frame's image lives and what its calibrated K is.
+
+    ``split``: a split file or its lines; ``frame_ids``: offsets to load (target first);
+    ``train=False`` disables augmentation; ``calib_intrinsics=False`` uses KITTI's fixed K
+    (fx=0.58, fy=1.92, cx=cy=0.5); augmentation draws depend only on (seed, epoch, index);
+    ``check_files`` stats every needed image up front so a bad split fails before training.
+    """
+
+    def __init__(
+        self,
+        data_path: str | Path,
+        split: SplitSource,
+        height: int,
+        width: int,
+        frame_ids: Sequence[int] = (0, -1, 1),
+        img_ext: str = ".png",
+        train: bool = True,
+        calib_intrinsics: bool = True,
+        flip_prob: float = 0.5,
+        jitter_prob: float = 0.5,
+        seed: int = 0,
+        check_files: bool = True,
+    ) -> None:
+        self.data_path = Path(data_path)
+        self.lines: list[SplitLine] = read_split(split)
+        self.height, self.width = int(height), int(width)
+        self.frame_ids = tuple(int(f) for f in frame_ids)
+        self.img_ext = img_ext if img_ext.startswith(".") else f".{img_ext}"
+        self.train = train
+        self.calib_intrinsics = calib_intrinsics
+        self.flip_prob, self.jitter_prob = (flip_prob, jitter_prob) if train else (0.0, 0.0)
+        self.seed = seed
+        self.epoch = 0
+        if check_files:
+            self.check_files()
+
+    # -- what subclasses provide -------------------------------------------------------------
+    def image_path(self, line: SplitLine, frame: int) -> Path:
+        """Path of the image of ``line``'s camera at ``frame``."""
+        raise NotImplementedError
+
+    def calib_k(self, line: SplitLine) -> np.ndarray:
+        """Normalised (3, 3) K of ``line``'s camera from its calibration file."""
+        raise NotImplementedError
+
+    # -- shared logic -------------------------------------------------------------------------
+    def check_files(self) -> None:
+        """Fail early, naming the split line, when a frame or its neighbours are missing."""
+        for line in self.lines:
+            for offset in self.frame_ids:
+                path = self.image_path(line, line.frame + offset)
+                if not path.is_file():
+                    raise PoseconsError(f"{line.where}: frame {line.frame}{offset:+d} of '{line}' missing: {path}")
+
+    def intrinsics(self, line: SplitLine) -> np.ndarray:
+        """Normalised (3, 3) K: the calibrated one, or KITTI's fixed K when calibration is off."""
+        return self.calib_k(line) if self.calib_intrinsics else KITTI_FIXED_K
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the epoch whose augmentation draws ``__getitem__`` reproduces."""
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return len(self.lines)
+
+    def load_frame(self, path: Path, flip: bool) -> torch.Tensor:
+        """Decode once, resize once (antialiased bilinear), flip: (3, H, W) float32 in [0, 1]."""
+        img = load_rgb(path, draft_size=(self.width, self.height))
+        if img.size != (self.width, self.height):
+            img = img.resize((self.width, self.height), Image.BILINEAR)
+        if flip:
+            img = img.transpose(Image.FLIP_LEFT_RIGHT)
+        return torch.from_numpy(np.asarray(img).copy()).permute(2, 0, 1).float().div_(255.0)
+
+    def __getitem__(self, index: int) -> dict:
+        line = self.lines[index]
+        if self.train:
+            flip, jitter = draw_augmentation(sample_rng(self.seed, self.epoch, index), self.flip_prob, self.jitter_prob)
+        else:
+            flip, jitter = False, np.array(IDENTITY_JITTER, dtype=np.float32)
+        frames = torch.stack([self.load_frame(self.image_path(line, line.frame + f), flip) for f in self.frame_ids])
+        k = self.intrinsics(line).copy()
+        if flip:
+            k[0, 2] = 1.0 - k[0, 2]
+        return {
+            "frames": frames,
+            "intrinsics": torch.from_numpy(k),
+            "color_aug": torch.from_numpy(jitter),
+            "index": index,
+            "folder": line.folder,
+            "frame": line.frame,
+            "side": line.side,
+        }

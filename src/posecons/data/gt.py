@@ -1,0 +1,110 @@
+"""Ground-truth depth for evaluation (SPEC §8): LiDAR projection and KITTI's improved PNGs.
+
+Stored as one ``.npz`` without pickles: float32 (H, W) maps under keys ``000000``, ``000001``, …
+in split order (0 = no ground truth; sizes may differ between dates) and a unicode array
+``lines`` holding the split lines (``<folder> <frame> <side>``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal, Optional
+
+import numpy as np
+from PIL import Image
+
+from ..errors import PoseconsError
+from .calib import raw_projection, velo_to_image
+from .io import atomic_file, load_velodyne, require_file
+from .kitti_raw import CAMERA
+from .splits import SplitSource, read_split
+
+DepthKind = Literal["velo_x", "camera_z"]
+
+
+def velo_to_depth_map(
+    points: np.ndarray, p_velo_img: np.ndarray, width: int, height: int, depth: DepthKind = "velo_x"
+) -> np.ndarray:
+    """Project a scan into a sparse depth map following the KITTI devkit convention.
+
+    points: (N, ≥3) Velodyne x, y, z[, reflectance]; p_velo_img: (3, 4). Keeps points with x ≥ 0
+    (and in front of the camera), pixel = round(u) − 1, round(v) − 1, inside (width, height); the
+    value is the LiDAR forward x (Eigen protocol) or the camera z; the smallest value wins a pixel.
+    Returns float32 (height, width), 0 where no point landed.
+    """
+    if depth not in ("velo_x", "camera_z"):
+        raise PoseconsError(f"unknown depth kind {depth!r} (velo_x or camera_z)")
+    pts = points[points[:, 0] >= 0, :3].astype(np.float64)
+    proj = np.concatenate([pts, np.ones((len(pts), 1))], axis=1) @ p_velo_img.T
+    front = proj[:, 2] > 0  # a point behind the camera has no pixel (never the case in real scans)
+    pts, proj = pts[front], proj[front]
+    col = np.round(proj[:, 0] / proj[:, 2]).astype(np.int64) - 1
+    row = np.round(proj[:, 1] / proj[:, 2]).astype(np.int64) - 1
+    value = pts[:, 0] if depth == "velo_x" else proj[:, 2]
+    inside = (col >= 0) & (row >= 0) & (col < width) & (row < height)
+    out = np.full(height * width, np.inf)
+    np.minimum.at(out, row[inside] * width + col[inside], value[inside])
+    out[np.isinf(out)] = 0.0
+    return out.reshape(height, width).astype(np.float32)
+
+
+def read_improved_gt(path: Path) -> np.ndarray:
+    """KITTI improved (annotated) depth PNG: uint16 / 256 metres, 0 = invalid → float32 (H, W)."""
+    require_file(Path(path), "improved ground-truth PNG")
+    try:
+        with Image.open(path) as img:
+            raw = np.asarray(img)
+    except OSError as exc:
+        raise PoseconsError(f"{path}: unreadable PNG ({exc})") from exc
+    if raw.ndim != 2:
+        raise PoseconsError(f"{path}: expected a single-channel 16-bit PNG, got shape {raw.shape}")
+    return (raw.astype(np.float32) / 256.0).astype(np.float32)
+
+
+def lidar_gt(data_path: Path, folder: str, frame: int, side: str = "l", depth: DepthKind = "velo_x") -> np.ndarray:
+    """Depth map of one raw frame from its Velodyne scan and its date's calibration."""
+    date_dir = Path(data_path) / folder.split("/")[0]
+    _, (width, height) = raw_projection(date_dir, CAMERA[side])
+    scan = load_velodyne(Path(data_path) / folder / "velodyne_points" / "data" / f"{frame:010d}.bin")
+    return velo_to_depth_map(scan, velo_to_image(date_dir, CAMERA[side]), width, height, depth)
+
+
+def improved_gt_path(data_path: Path, folder: str, frame: int, side: str = "l", root: Optional[Path] = None) -> Path:
+    """``<data_path>/<folder>/proj_depth/…`` or, with ``root`` (KITTI's depth_annotated layout),
+    ``<root>/<drive>/proj_depth/groundtruth/image_0k/<frame:010d>.png``."""
+    base = Path(data_path) / folder if root is None else Path(root) / Path(folder).name
+    return base / "proj_depth" / "groundtruth" / f"image_0{CAMERA[side]}" / f"{frame:010d}.png"
+
+
+def export_gt(
+    data_path: Path,
+    split: SplitSource,
+    out: Path,
+    improved: bool = False,
+    improved_root: Optional[Path] = None,
+    depth: DepthKind = "velo_x",
+) -> int:
+    """Write the ground truth of every split line to ``out`` (.npz, see module doc); returns the count."""
+    lines = read_split(split)
+    arrays = {}
+    for i, line in enumerate(lines):
+        if improved:
+            arrays[f"{i:06d}"] = read_improved_gt(improved_gt_path(data_path, line.folder, line.frame, line.side, improved_root))
+        else:
+            arrays[f"{i:06d}"] = lidar_gt(data_path, line.folder, line.frame, line.side, depth)
+    arrays["lines"] = np.array([str(line) for line in lines], dtype=np.str_)
+    with atomic_file(Path(out)) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
+    return len(lines)
+
+
+def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
+    """Read an exported ground-truth file: (list of float32 (H, W) maps, list of split lines)."""
+    path = require_file(Path(path), "ground-truth file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            lines = [str(s) for s in data["lines"]]
+            maps = [data[f"{i:06d}"] for i in range(len(lines))]
+    except (OSError, KeyError, ValueError) as exc:
+        raise PoseconsError(f"{path}: not a posecons ground-truth file ({exc})") from exc
+    return maps, lines
