@@ -75,6 +75,8 @@ class TrainConfig:
     log_every: int = 50
     image_every: int = 500
     val_every: int = 0  # steps between validations; 0: once per epoch
+    val_samples: int = 500  # validation uses at most this many val-split samples, spread evenly
+    checkpoint_every: int = 500  # steps between `last` checkpoints (and at every epoch end)
     max_bad_steps: int = 5  # consecutive non-finite losses before the run stops
 
 

@@ -1,0 +1,102 @@
+"""`posecons train` and `posecons demo`."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from ..config import load_config
+from ..errors import PoseconsError
+
+PRESETS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def resolve_preset(name: str) -> Path:
+    """A preset file path, or a bundled preset name such as ``kitti/cycle``."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    bundled = PRESETS / (name if name.endswith(".yaml") else f"{name}.yaml")
+    if bundled.is_file():
+        return bundled
+    names = sorted(str(p.relative_to(PRESETS).with_suffix("")) for p in PRESETS.rglob("*.yaml"))
+    raise PoseconsError(f"config {name!r} is neither a file nor a bundled preset ({', '.join(names)})")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("train", help="train depth and pose networks from a preset",
+                              description="Train a run. Multi-GPU on one node: --devices N (torchrun is started "
+                                          "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node.")
+    p.add_argument("--config", help="preset file or bundled name (e.g. kitti/cycle); default on --resume: the run's")
+    p.add_argument("--data-path", required=True, help="dataset root (KITTI raw layout, or odometry root)")
+    p.add_argument("--out", required=True, help="run directory")
+    p.add_argument("--split-dir", help="folder with train_files.txt/val_files.txt (default DATA/splits/<data.split>)")
+    p.add_argument("--max-steps", type=int, help="stop after this many optimiser steps")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config value, e.g. --set loss.constraints=[cyc] (repeatable)")
+    p.add_argument("--resume", action="store_true", help="continue RUN/checkpoints/last.pt exactly")
+    p.add_argument("--devices", type=int, default=1, help="processes (GPUs) per node")
+    p.add_argument("--nodes", type=int, default=1)
+    p.add_argument("--rdzv-endpoint", help="HOST:PORT of the rendezvous for --nodes > 1")
+    p.add_argument("--accelerator", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--precision", choices=("32", "bf16", "16"), help="mixed precision on GPU")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=train_command)
+
+    d = subparsers.add_parser("demo", help="synthetic data → train on the CPU → evaluate → report with plots")
+    d.add_argument("--out", default="runs/demo")
+    d.add_argument("--minutes", type=float, default=8.0, help="training time budget")
+    d.add_argument("--seed", type=int, default=0)
+    d.set_defaults(func=demo_command)
+
+
+def _config(args: argparse.Namespace):
+    overrides = list(args.overrides)
+    if args.max_steps is not None:
+        overrides.append(f"train.max_steps={args.max_steps}")
+    if args.precision:
+        overrides.append(f"train.precision='{args.precision}'")
+    path = resolve_preset(args.config) if args.config else None
+    if path is None:
+        run_config = Path(args.out) / "config.yaml"
+        if not (args.resume and run_config.is_file()):
+            raise PoseconsError("--config is required (except with --resume of an existing run)")
+        path = run_config
+    return load_config(path, overrides)
+
+
+def _launch_torchrun(args: argparse.Namespace) -> int:
+    """Re-run this command under torchrun with one process per device."""
+    cmd = [sys.executable, "-m", "torch.distributed.run", f"--nproc-per-node={args.devices}", f"--nnodes={args.nodes}"]
+    if args.nodes > 1:
+        if not args.rdzv_endpoint:
+            raise PoseconsError("--nodes > 1 needs --rdzv-endpoint HOST:PORT (the same on every node)")
+        cmd += ["--rdzv-backend=c10d", f"--rdzv-endpoint={args.rdzv_endpoint}", "--rdzv-id=posecons"]
+    else:
+        cmd.append("--standalone")
+    argv = [a for a in sys.argv[1:]]
+    return subprocess.call(cmd + ["-m", "posecons.cli"] + argv)
+
+
+def train_command(args: argparse.Namespace) -> int:
+    config = _config(args)  # validate before anything starts, also before launching workers
+    if (args.devices > 1 or args.nodes > 1) and "WORLD_SIZE" not in os.environ:
+        return _launch_torchrun(args)
+    from .trainer import train
+
+    summary = train(config, args.data_path, args.out, args.split_dir, args.resume, args.accelerator, args.quiet)
+    if int(os.environ.get("RANK", 0)) == 0:
+        print(f"trained {summary['steps']} steps in {summary['minutes']:.1f} min → {args.out}")
+    return 0
+
+
+def demo_command(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    summary = run_demo(Path(args.out), minutes=args.minutes, seed=args.seed)
+    print(f"report: {Path(args.out) / 'report.md'}  abs_rel {summary['abs_rel']:.3f} "
+          f"(untrained {summary['abs_rel_untrained']:.3f}), σ/μ {summary['scale_cv']:.3f}")
+    return 0

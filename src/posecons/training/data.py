@@ -1,0 +1,33 @@
+"""From a config and a data path to the training and validation datasets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..config import Config
+from ..data.frames import FrameDataset
+from ..data.kitti_odometry import KittiOdometryDataset
+from ..data.kitti_raw import KittiRawDataset
+from ..errors import PoseconsError
+
+
+def split_files(config: Config, data_path: str | Path, split_dir: str | Path | None) -> tuple[Path, Path | None]:
+    """(train split, val split or None); the split directory defaults to DATA/splits/<data.split>."""
+    data_path = Path(data_path)
+    if not data_path.is_dir():
+        raise PoseconsError(f"data path {data_path} is not a directory")
+    folder = Path(split_dir) if split_dir else data_path / "splits" / config.data.split
+    train = folder / "train_files.txt"
+    if not train.is_file():
+        raise PoseconsError(f"{train}: training split file not found (data.split={config.data.split!r}; "
+                            f"pass --split-dir or run `posecons synth` / `posecons prepare` to create one)")
+    val = folder / "val_files.txt"
+    return train, val if val.is_file() else None
+
+
+def build_dataset(config: Config, data_path: str | Path, split_file: Path, train: bool) -> FrameDataset:
+    m, d = config.model, config.data
+    cls = KittiOdometryDataset if d.dataset == "kitti_odom" else KittiRawDataset
+    return cls(data_path, split_file, m.height, m.width, frame_ids=m.frame_ids, img_ext=d.img_ext, train=train,
+               calib_intrinsics=d.calib_intrinsics, flip_prob=d.flip_prob, jitter_prob=d.jitter_prob,
+               seed=config.train.seed)

@@ -1,0 +1,308 @@
+"""Training on one CPU, one GPU, or many GPUs and nodes with plain ``torch.distributed``.
+
+Multi-process runs are launched by ``torchrun`` (``posecons train --devices N`` starts it for
+you on one node); each process reads ``RANK``/``WORLD_SIZE``/``LOCAL_RANK`` from the environment
+that torchrun sets. The run directory holds everything of a run::
+
+    RUN/config.yaml             resolved config
+    RUN/checkpoints/last.pt     model, optimiser, scheduler, step, epoch, data position, RNG
+    RUN/checkpoints/epoch_NN.pt
+    RUN/tb/                     TensorBoard scalars and images
+    RUN/metrics/step_NNNNNN.json and RUN/metrics.jsonl   one record per validation
+
+Resume is exact: the data order of an epoch is a pure function of (seed, epoch), augmentation
+draws of (seed, epoch, index), and the RNG states are saved, so an interrupted run that is
+resumed ends with the same weights as an uninterrupted one (in deterministic mode).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import random
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+import torch.distributed as dist
+import yaml
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DataLoader, DistributedSampler
+from tqdm import tqdm
+
+from ..checkpoint import load_checkpoint, save_checkpoint
+from ..config import Config
+from ..errors import PoseconsError
+from ..model import PoseConsModel
+from .data import build_dataset, split_files
+from .validation import Validator
+
+
+@dataclass
+class Dist:
+    rank: int = 0
+    world: int = 1
+    local_rank: int = 0
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+
+def init_distributed(accelerator: str) -> tuple[Dist, torch.device]:
+    """Join the process group torchrun describes (if any) and pick this process's device."""
+    env = Dist(int(os.environ.get("RANK", 0)), int(os.environ.get("WORLD_SIZE", 1)),
+               int(os.environ.get("LOCAL_RANK", 0)))
+    use_cuda = accelerator == "cuda" or (accelerator == "auto" and torch.cuda.is_available())
+    if use_cuda and not torch.cuda.is_available():
+        raise PoseconsError("--accelerator cuda was asked for, but no CUDA device is visible")
+    device = torch.device("cuda", env.local_rank) if use_cuda else torch.device("cpu")
+    if use_cuda:
+        torch.cuda.set_device(device)
+    if env.world > 1 and not dist.is_initialized():
+        dist.init_process_group("nccl" if use_cuda else "gloo")
+    return env, device
+
+
+def _prepare_run_dir(out: Path, resume: bool) -> None:
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write_test"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
+    if not resume and (out / "checkpoints" / "last.pt").exists():
+        raise PoseconsError(f"{out} already holds a run: pass --resume to continue it, or choose a new --out")
+
+
+class Trainer:
+    def __init__(self, config: Config, data_path: str | Path, out: str | Path, split_dir: str | Path | None = None,
+                 resume: bool = False, accelerator: str = "auto", quiet: bool = False):
+        self.config, self.out = config, Path(out)
+        t = config.train
+        self.env, self.device = init_distributed(accelerator)
+        if self.env.main:
+            _prepare_run_dir(self.out, resume)
+        self.quiet = quiet or not self.env.main
+        if t.deterministic:
+            torch.use_deterministic_algorithms(True)
+        self._seed_everything(t.seed + self.env.rank)
+
+        train_file, val_file = split_files(config, data_path, split_dir)
+        self.train_set = build_dataset(config, data_path, train_file, train=True)
+        if len(self.train_set) < t.batch_size * self.env.world:
+            raise PoseconsError(f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
+                                f"({t.batch_size} × {self.env.world} processes)")
+        self.validator = Validator(config, data_path, val_file, self.out, self.device) if val_file else None
+
+        model = PoseConsModel(config).to(self.device)
+        if t.sync_bn and self.env.world > 1:
+            model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
+        self.model = model
+        self.ddp = (DistributedDataParallel(model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
+                    if self.env.world > 1 else model)
+        self.optimizer = torch.optim.Adam(model.parameters(), lr=t.lr)
+        self.scheduler = torch.optim.lr_scheduler.MultiStepLR(self.optimizer, t.lr_decay_epochs, t.lr_decay)
+        self.scaler = torch.amp.GradScaler(self.device.type, enabled=t.precision == "16")
+        self.steps_per_epoch = len(self.train_set) // (t.batch_size * self.env.world * t.grad_accum)
+        self.step = self.epoch = self.batch_in_epoch = self.bad_steps = self.skipped_steps = 0
+        if resume:
+            self._load(self.out / "checkpoints" / "last.pt")
+        elif self.env.main:
+            (self.out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
+        self.writer = None
+        if self.env.main:
+            from torch.utils.tensorboard import SummaryWriter
+            self.writer = SummaryWriter(self.out / "tb")
+
+    # ------------------------------------------------------------------ state
+    def _seed_everything(self, seed: int) -> None:
+        random.seed(seed)
+        torch.manual_seed(seed)
+
+    def state(self) -> dict[str, Any]:
+        return {
+            "config": self.config.to_dict(), "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
+            "scaler": self.scaler.state_dict(), "step": self.step, "epoch": self.epoch,
+            "batch_in_epoch": self.batch_in_epoch, "bad_steps": self.bad_steps, "skipped_steps": self.skipped_steps,
+            "rng": {"torch": torch.get_rng_state(), "python": random.getstate(),
+                    "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else []},
+        }
+
+    def _load(self, path: Path) -> None:
+        state = load_checkpoint(path, map_location=self.device)
+        saved = state["config"]
+        if saved["model"] != self.config.to_dict()["model"]:
+            raise PoseconsError(f"{path}: its model config {saved['model']} differs from the requested "
+                                f"{self.config.to_dict()['model']}; resume with the run's own config.yaml")
+        try:
+            self.model.load_state_dict(state["model"])
+        except RuntimeError as exc:
+            raise PoseconsError(f"{path}: weights do not fit the model: {str(exc).splitlines()[0]}") from exc
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.scaler.load_state_dict(state["scaler"])
+        for key in ("step", "epoch", "batch_in_epoch", "bad_steps", "skipped_steps"):
+            setattr(self, key, int(state[key]))
+        if self.env.world == 1:  # per-rank RNG streams are only saved for rank 0
+            torch.set_rng_state(state["rng"]["torch"].cpu())
+            random.setstate(_as_tuple(state["rng"]["python"]))
+            if self.device.type == "cuda" and state["rng"]["cuda"]:
+                torch.cuda.set_rng_state_all([s.cpu() for s in state["rng"]["cuda"]])
+
+    def save(self, name: str = "last.pt") -> None:
+        if self.env.main:
+            save_checkpoint(self.out / "checkpoints" / name, self.state())
+
+    # ------------------------------------------------------------------ loop
+    def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
+        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch)."""
+        t = self.config.train
+        self.train_set.set_epoch(epoch)
+        sampler = DistributedSampler(self.train_set, self.env.world, self.env.rank, shuffle=True,
+                                     seed=t.seed, drop_last=True)
+        sampler.set_epoch(epoch)
+        indices = list(sampler)[skip_batches * t.batch_size:]
+        # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
+        return DataLoader(self.train_set, batch_size=t.batch_size, sampler=indices, drop_last=True,
+                          num_workers=self.config.data.num_workers, pin_memory=self.device.type == "cuda",
+                          persistent_workers=False, generator=torch.Generator().manual_seed(t.seed + epoch))
+
+    def _autocast(self):
+        precision = self.config.train.precision
+        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(precision)
+        return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None and self.device.type == "cuda")
+
+    def total_steps(self) -> int:
+        t = self.config.train
+        full = self.steps_per_epoch * t.epochs
+        return min(full, t.max_steps) if t.max_steps else full
+
+    def fit(self) -> dict[str, Any]:
+        t = self.config.train
+        total = self.total_steps()
+        bar = tqdm(total=total, initial=self.step, disable=self.quiet, dynamic_ncols=True, unit="step")
+        start, last_metrics = time.time(), {}
+        self.ddp.train()
+        while self.step < total and self.epoch < t.epochs:
+            micro = 0
+            for batch in self._loader(self.epoch, self.batch_in_epoch * t.grad_accum):
+                losses = self._micro_step(batch, last=(micro + 1) % t.grad_accum == 0)
+                micro += 1
+                if micro % t.grad_accum:
+                    continue
+                self.batch_in_epoch += 1
+                self.step += 1
+                bar.update(1)
+                if losses is not None:
+                    bar.set_postfix({k: f"{v:.3g}" for k, v in losses.items()}, refresh=False)
+                    self._log(losses, batch)
+                if t.val_every and self.step % t.val_every == 0:
+                    last_metrics = self.validate()
+                if t.checkpoint_every and self.step % t.checkpoint_every == 0:
+                    self.save()
+                if self.step >= total or self.batch_in_epoch >= self.steps_per_epoch:
+                    break
+            if self.batch_in_epoch >= self.steps_per_epoch:  # epoch complete
+                self.epoch += 1
+                self.batch_in_epoch = 0
+                self.scheduler.step()
+                if not t.val_every:
+                    last_metrics = self.validate()
+                self.save(f"epoch_{self.epoch:02d}.pt")
+            self.save()
+        bar.close()
+        if t.val_every and self.step % t.val_every:
+            last_metrics = self.validate()
+        summary = {"steps": self.step, "epochs": self.epoch, "skipped_steps": self.skipped_steps,
+                   "minutes": (time.time() - start) / 60, "last_validation": last_metrics}
+        if self.writer:
+            self.writer.close()
+        return summary
+
+    def _micro_step(self, batch: dict, last: bool) -> dict[str, float] | None:
+        """Forward/backward of one micro-batch; the optimiser steps on the last of ``grad_accum``."""
+        t = self.config.train
+        batch = {k: v.to(self.device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+        sync = last or self.env.world == 1
+        context = self.ddp.no_sync() if not sync and hasattr(self.ddp, "no_sync") else contextlib.nullcontext()
+        with context:
+            with self._autocast():
+                _, losses = self.ddp(batch, step=self.step)
+            finite = torch.isfinite(losses["total"]).float()
+            if self.env.world > 1:  # every rank must agree to skip, or DDP would hang
+                dist.all_reduce(finite, op=dist.ReduceOp.MIN)
+            if finite.item() == 0:
+                return self._skip_step()
+            self.scaler.scale(losses["total"] / t.grad_accum).backward()
+        if not last:
+            return None
+        self.scaler.step(self.optimizer)
+        self.scaler.update()
+        self.optimizer.zero_grad(set_to_none=True)
+        self.bad_steps = 0
+        return {k: float(v.detach()) for k, v in losses.items()}
+
+    def _skip_step(self) -> None:
+        self.optimizer.zero_grad(set_to_none=True)
+        self.bad_steps += 1
+        self.skipped_steps += 1
+        if self.bad_steps >= self.config.train.max_bad_steps:
+            self.save()
+            raise PoseconsError(f"the loss was not finite for {self.bad_steps} steps in a row (step {self.step}); "
+                                f"the last good state is in {self.out / 'checkpoints' / 'last.pt'}. "
+                                "Try a lower train.lr or train.precision=32")
+        return None
+
+    def _log(self, losses: dict[str, float], batch: dict) -> None:
+        t = self.config.train
+        if not self.writer:
+            return
+        if self.step % t.log_every == 0 or self.step == 1:
+            for k, v in losses.items():
+                self.writer.add_scalar(f"loss/{k}", v, self.step)
+            self.writer.add_scalar("lr", self.optimizer.param_groups[0]["lr"], self.step)
+        if t.image_every and self.step % t.image_every == 0:
+            self.model.eval()
+            with torch.no_grad():
+                outputs, _ = self.model(batch, step=self.step)
+            self.model.train()
+            self.writer.add_image("input", batch["frames"][0, 0], self.step)
+            disp = outputs["disp"][0][0]
+            self.writer.add_image("disparity", disp / disp.max(), self.step)
+            self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
+
+    def validate(self) -> dict[str, Any]:
+        if not self.validator or not self.env.main:
+            return {}
+        metrics = self.validator.run(self.model, self.step)
+        self.model.train()
+        if self.writer:
+            for k, v in metrics.items():
+                if isinstance(v, (int, float)) and math.isfinite(v):
+                    self.writer.add_scalar(f"val/{k}", v, self.step)
+        return metrics
+
+
+def _as_tuple(value):
+    """Python's RNG state comes back from the checkpoint with lists where it had tuples."""
+    return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
+
+
+def train(config: Config, data_path: str | Path, out: str | Path, split_dir: str | Path | None = None,
+          resume: bool = False, accelerator: str = "auto", quiet: bool = False) -> dict[str, Any]:
+    """Train a run and return a summary (steps, minutes, last validation metrics)."""
+    trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+    summary = trainer.fit()
+    if trainer.env.main:
+        (Path(out) / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    if dist.is_initialized():
+        dist.barrier()
+        dist.destroy_process_group()
+    return summary
