@@ -1,0 +1,71 @@
+"""`posecons predict` and `posecons export`: thin wrappers over :mod:`.predict` and :mod:`.export`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .io import DEFAULT_FPS
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("predict", help="depth, ego-motion and point clouds for images or a video",
+                              description="Depth for every frame (.npy, 16-bit PNG, colour PNG, side-by-side "
+                                          "MP4 for video), a trajectory (KITTI and TUM) and optional point "
+                                          "clouds. Outputs are staged inside OUT and moved into place at the end.")
+    p.add_argument("--checkpoint", required=True, type=Path,
+                   help="checkpoint (.pt / .safetensors), an export directory or its depth.onnx")
+    p.add_argument("--input", required=True, type=Path, help="an image, a folder of images or a video")
+    p.add_argument("--out", type=Path, default=Path("predictions"), help="output directory (default: predictions)")
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--scale", type=float, help="multiply every depth and translation by this factor")
+    group.add_argument("--calibrate-gt", metavar="DIR|NPZ",
+                       help="scale = median over the first frames of median(gt)/median(pred); a folder of 16-bit "
+                            "depth PNGs named like the frames, or an export-gt .npz")
+    group.add_argument("--camera-height", type=float, metavar="METRES",
+                       help="scale from the camera's height above the ground plane fitted in the first frames")
+    p.add_argument("--calibrate-frames", type=int, default=10, metavar="N", help="frames used to calibrate (10)")
+    p.add_argument("--intrinsics", metavar="fx,fy,cx,cy", help="pixel intrinsics of the input images")
+    p.add_argument("--calib", type=Path, help="KITTI calib_cam_to_cam.txt (P_rect_02) or odometry calib.txt (P2)")
+    p.add_argument("--pointcloud", action="store_true", help="write a coloured PLY per frame")
+    p.add_argument("--every", type=int, default=1, metavar="K", help="point cloud of every K-th frame")
+    p.add_argument("--ascii-ply", action="store_true", help="ASCII instead of binary PLY")
+    p.add_argument("--no-trajectory", action="store_true", help="skip the pose network")
+    p.add_argument("--no-video", action="store_true", help="no side-by-side MP4 for video input")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS, help="frame rate of image folders (timestamps)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=predict_command)
+
+    e = subparsers.add_parser("export", help="depth and pose networks to ONNX (verified) and safetensors")
+    e.add_argument("--checkpoint", required=True, type=Path)
+    e.add_argument("--out", required=True, type=Path)
+    e.add_argument("--tolerance", type=float, default=1e-4,
+                   help="largest accepted |ONNX Runtime − PyTorch| on sample inputs (default 1e-4)")
+    e.set_defaults(func=export_command)
+
+
+def predict_command(args: argparse.Namespace) -> int:
+    from .backend import load_predictor
+    from .predict import PredictOptions, predict
+
+    options = PredictOptions(
+        batch_size=args.batch_size, scale=args.scale, calibrate_gt=args.calibrate_gt,
+        calibrate_frames=args.calibrate_frames, camera_height=args.camera_height, intrinsics=args.intrinsics,
+        calib=str(args.calib) if args.calib else None, pointcloud=args.pointcloud, every=args.every,
+        ascii_ply=args.ascii_ply, trajectory=not args.no_trajectory, video=not args.no_video, fps=args.fps,
+        progress=not args.quiet).check()
+    summary = predict(load_predictor(args.checkpoint, args.device), args.input, args.out, options)
+    print(f"{summary['frames']} frames → {args.out} (scale {summary['scale']:.6g}, {summary['seconds']:.1f} s)")
+    return 0
+
+
+def export_command(args: argparse.Namespace) -> int:
+    from .export import export_model
+
+    info = export_model(args.checkpoint, args.out, tolerance=args.tolerance)
+    print(json.dumps(info["max_abs_diff"], indent=2))
+    print(f"exported to {args.out} (max |ONNX − PyTorch| within {args.tolerance:g})")
+    return 0

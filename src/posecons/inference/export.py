@@ -1,0 +1,104 @@
+"""Export a checkpoint: the depth and pose networks to ONNX (dynamic batch axis), checked against
+PyTorch with ONNX Runtime, plus safetensors weights and ``export.json``.
+
+Graphs:
+    depth.onnx  images (B, 3, H, W) in [0, 1] → disparity (B, 1, H, W), the scaled disparity at full
+                scale (depth = 1 / disparity, in the model's units)
+    pose.onnx   image_a, image_b (B, 3, H, W) → pose (B, 6) [axis-angle, translation] and
+                matrix (B, 4, 4) T_{b←a}, mapping points of camera a into camera b
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn as nn
+
+from ..checkpoint import load_model, save_safetensors
+from ..errors import PoseconsError
+from ..geometry import pose_vec_to_mat
+from .backend import DEPTH_ONNX, EXPORT_INFO, POSE_ONNX
+from .io import staged_output
+
+OPSET = 17
+WEIGHTS = "weights.safetensors"
+
+
+class DepthGraph(nn.Module):
+    def __init__(self, model: nn.Module):
+        super().__init__()
+        self.model = model
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        return self.model.predict_depth(images)[0]
+
+
+class PoseGraph(nn.Module):
+    def __init__(self, model: nn.Module):
+        super().__init__()
+        self.model = model
+
+    def forward(self, image_a: torch.Tensor, image_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        axisangle, translation = self.model.pose_net(image_a, image_b)
+        return torch.cat([axisangle, translation], -1)[:, 0], pose_vec_to_mat(axisangle, translation)
+
+
+def _export(graph: nn.Module, inputs: tuple, path: Path, input_names: list[str], output_names: list[str]) -> None:
+    # The TorchScript-based exporter (dynamo=False) works offline without onnxscript and has stable
+    # dynamic_axes; the exporter's warnings about traced shape checks are expected (sizes are fixed).
+    dynamic = {name: {0: "batch"} for name in input_names + output_names}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(graph.eval(), inputs, str(path), dynamo=False, opset_version=OPSET,
+                          input_names=input_names, output_names=output_names, dynamic_axes=dynamic)
+    graph.eval()  # the exporter restores the wrapper's original mode on its children
+
+
+def _max_diff(graph: nn.Module, path: Path, inputs: dict[str, torch.Tensor]) -> dict[str, float]:
+    """Largest |ONNX Runtime − PyTorch| per output on ``inputs``."""
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    names = [o.name for o in session.get_outputs()]
+    got = session.run(names, {k: v.numpy() for k, v in inputs.items()})
+    with torch.no_grad():
+        want = graph(*inputs.values())
+    want = want if isinstance(want, tuple) else (want,)
+    return {n: float(np.abs(g - w.numpy()).max()) for n, g, w in zip(names, got, want)}
+
+
+def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-4, batch: int = 2) -> dict:
+    """Write depth.onnx, pose.onnx, weights.safetensors and export.json into ``out``.
+
+    The ONNX graphs are traced with batch 1 and verified with ``batch`` random frames (so the
+    dynamic batch axis is exercised); a difference above ``tolerance`` raises PoseconsError and
+    leaves ``out`` untouched. Returns the export.json content.
+    """
+    model, config = load_model(checkpoint)
+    h, w = config.model.height, config.model.width
+    generator = torch.Generator().manual_seed(0)
+    sample = torch.rand(3, batch, 3, h, w, generator=generator)
+    depth, pose = DepthGraph(model), PoseGraph(model)
+    with staged_output(Path(out)) as tmp:
+        _export(depth, (sample[0, :1],), tmp / DEPTH_ONNX, ["images"], ["disparity"])
+        _export(pose, (sample[1, :1], sample[2, :1]), tmp / POSE_ONNX, ["image_a", "image_b"], ["pose", "matrix"])
+        diffs = {"depth": _max_diff(depth, tmp / DEPTH_ONNX, {"images": sample[0]}),
+                 "pose": _max_diff(pose, tmp / POSE_ONNX, {"image_a": sample[1], "image_b": sample[2]})}
+        worst = max(v for d in diffs.values() for v in d.values())
+        if not worst <= tolerance:  # also catches NaN
+            raise PoseconsError(f"{checkpoint}: ONNX Runtime differs from PyTorch by {worst:.3g} "
+                                f"(tolerance {tolerance:g}): {diffs}")
+        save_safetensors(tmp / WEIGHTS, model, config)
+        info = {"checkpoint": str(checkpoint), "height": h, "width": w, "min_depth": config.model.min_depth,
+                "max_depth": config.model.max_depth, "opset": OPSET, "batch_verified": batch,
+                "tolerance": tolerance, "max_abs_diff": diffs,
+                "files": {"depth": DEPTH_ONNX, "pose": POSE_ONNX, "weights": WEIGHTS},
+                "outputs": {"depth": "disparity (B,1,H,W): scaled disparity, depth = 1/disparity",
+                            "pose": "pose (B,6) axis-angle+translation; matrix (B,4,4) T_{b<-a}"},
+                "config": config.to_dict()}
+        (tmp / EXPORT_INFO).write_text(json.dumps(info, indent=2))
+    return info

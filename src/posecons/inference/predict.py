@@ -1,0 +1,210 @@
+"""Depth, ego-motion and point clouds for an image, a folder of images or a video.
+
+Frames stream through in batches: each is resized to the network size, its disparity is resized
+bilinearly back to the original size and inverted, and the sequence's single scale is applied.
+Scale calibration (if any) runs first over the first frames only, then the main pass writes
+everything into a staging folder inside OUT that is moved into place at the end (see
+:func:`posecons.inference.io.staged_output`).
+
+Output layout (``<name>`` is the image stem, or the 6-digit frame index of a video)::
+
+    OUT/depth/<name>.npy         float32 (H, W) depth at the original size, scaled
+    OUT/depth_png/<name>.png     uint16 depth × 256 (KITTI style, 0 = invalid)
+    OUT/depth_color/<name>.png   colour-mapped disparity
+    OUT/pointcloud/<name>.ply    with pointcloud=True, every k-th frame
+    OUT/video.mp4                video input: input | depth side by side
+    OUT/trajectory_kitti.txt, trajectory_tum.txt, trajectory.png   camera → world poses
+    OUT/scale.json, scale_drift.png (with ground truth), predict.json
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from PIL import Image
+from tqdm import tqdm
+
+from ..errors import PoseconsError
+from ..evaluation.pose import global_from_relative
+from ..evaluation.trajectory_io import write_kitti_poses, write_tum
+from . import scale as scaling
+from .backend import Predictor
+from .camera import normalised_to_pixel, resolve_intrinsics
+from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, resize_rgb, staged_output
+from .plots import colorize, plot_scale_drift, plot_topview
+from .pointcloud import depth_to_points, write_ply
+
+
+@dataclass
+class PredictOptions:
+    batch_size: int = 4
+    scale: float | None = None  # a known scale; else calibrate_gt, camera_height or none (1.0)
+    calibrate_gt: str | None = None  # folder of 16-bit depth PNGs or export-gt NPZ
+    calibrate_frames: int = 10  # frames (with GT, for calibrate_gt) used to calibrate
+    camera_height: float | None = None  # metres above the ground
+    intrinsics: str | None = None  # "fx,fy,cx,cy" in pixels of the input image
+    calib: str | None = None  # KITTI calibration file
+    pointcloud: bool = False
+    every: int = 1  # point cloud of every k-th frame
+    ascii_ply: bool = False
+    trajectory: bool = True
+    video: bool = True  # side-by-side MP4 for video input
+    fps: float = DEFAULT_FPS  # timestamps of image folders
+    progress: bool = True
+
+    def check(self) -> "PredictOptions":
+        chosen = [n for n in ("scale", "calibrate_gt", "camera_height") if getattr(self, n) is not None]
+        if len(chosen) > 1:
+            raise PoseconsError(f"choose one way to set the scale, got {', '.join(chosen)}")
+        for name in ("batch_size", "calibrate_frames", "every"):
+            if getattr(self, name) < 1:
+                raise PoseconsError(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("scale", "camera_height", "fps"):
+            value = getattr(self, name)
+            if value is not None and not value > 0:
+                raise PoseconsError(f"{name} must be positive, got {value}")
+        return self
+
+
+def batches(source: FrameSource, predictor: Predictor, size: int) -> Iterator[tuple[list[Frame], np.ndarray, torch.Tensor]]:
+    """(frames, network images (B, 3, h, w), scaled disparities (B, 1, h, w)) per batch."""
+    frames: list[Frame] = []
+    for frame in source:
+        frames.append(frame)
+        if len(frames) == size:
+            yield _run(frames, predictor)
+            frames = []
+    if frames:
+        yield _run(frames, predictor)
+
+
+def _run(frames: list[Frame], predictor: Predictor) -> tuple[list[Frame], np.ndarray, torch.Tensor]:
+    images = np.stack([resize_rgb(f.image, predictor.height, predictor.width) for f in frames])
+    return frames, images, predictor.disparity(images)
+
+
+def full_size_depth(disparity: torch.Tensor, height: int, width: int) -> np.ndarray:
+    """(1, h, w) scaled disparity → (height, width) float32 depth: bilinear resize, then invert."""
+    disp = F.interpolate(disparity[None].float(), size=(height, width), mode="bilinear", align_corners=False)
+    return (1.0 / disp[0, 0]).cpu().numpy()
+
+
+def calibrate(source: FrameSource, predictor: Predictor, options: PredictOptions, K_norm: np.ndarray,
+              gt: scaling.GroundTruth | None) -> scaling.ScaleResult:
+    """The sequence's scale from the first frames (see :class:`PredictOptions`)."""
+    if options.scale is not None:
+        return scaling.ScaleResult("given", float(options.scale))
+    if gt is None and options.camera_height is None:
+        return scaling.ScaleResult("none", 1.0)
+    names, scales = [], []
+    for frames, _, disps in batches(source, predictor, options.batch_size):
+        for frame, disp in zip(frames, disps):
+            if gt is not None:
+                target = gt.get(frame.name, frame.index)
+                if target is None:
+                    continue
+                scales.append(scaling.frame_scale(target, disp[0].cpu().numpy()))
+            else:
+                depth = full_size_depth(disp, *frame.size)
+                height = scaling.camera_height(depth, normalised_to_pixel(K_norm, *frame.size))
+                scales.append(options.camera_height / height)
+            names.append(frame.name)
+            if len(names) == options.calibrate_frames:
+                break
+        if len(names) == options.calibrate_frames:
+            break
+    if gt is not None:
+        return scaling.combine("ground_truth", names, scales, f"no frame of {source.path} has valid ground "
+                                                              f"truth in {gt.path}")
+    return scaling.combine("camera_height", names, scales, "no ground plane found")
+
+
+def _write_depth(out: Path, frame: Frame, depth: np.ndarray, disparity: np.ndarray) -> np.ndarray:
+    np.save(out / "depth" / f"{frame.name}.npy", depth.astype(np.float32))
+    png = np.clip(np.round(depth * 256), 0, 65535).astype(np.uint16)
+    Image.fromarray(png).save(out / "depth_png" / f"{frame.name}.png")
+    color = colorize(disparity)
+    Image.fromarray(color).save(out / "depth_color" / f"{frame.name}.png")
+    return color
+
+
+def predict(predictor: Predictor, input: str | Path, out: str | Path,
+            options: PredictOptions | None = None) -> dict:
+    """Run ``predictor`` over ``input`` and write the outputs described in the module docstring.
+
+    Returns the summary written to ``predict.json``.
+    """
+    options = (options or PredictOptions()).check()
+    source = FrameSource(input, options.fps)
+    first = next(iter(source))
+    K_norm = resolve_intrinsics(options.intrinsics, options.calib, *first.size)
+    gt = scaling.GroundTruth(options.calibrate_gt) if options.calibrate_gt else None
+    do_pose = options.trajectory and predictor.has_pose
+    start = time.perf_counter()
+    result = calibrate(source, predictor, options, K_norm, gt)
+    s = result.value
+    fps = source.video_fps if source.is_video else options.fps
+
+    with staged_output(Path(out)) as tmp:
+        folders = ["depth", "depth_png", "depth_color"] + (["pointcloud"] if options.pointcloud else [])
+        for name in folders:
+            (tmp / name).mkdir()
+        writer = SideBySideWriter(tmp / "video.mp4", fps) if source.is_video and options.video else None
+        steps, times, drift, previous, count = [], [], [], None, 0
+        bar = tqdm(total=len(source) or None, unit="frame", disable=not options.progress)
+        for frames, images, disps in batches(source, predictor, options.batch_size):
+            if do_pose:  # pairs (I_i, I_{i+1}) give T_{i+1←i}; the first frame has no predecessor
+                a = images[:-1] if previous is None else np.concatenate([previous, images[:-1]])
+                if len(a):
+                    steps.append(predictor.pose(a, images[len(images) - len(a):]))
+                previous = images[-1:]
+            for frame, disp in zip(frames, disps):
+                depth = full_size_depth(disp, *frame.size) * np.float32(s)
+                color = _write_depth(tmp, frame, depth, 1.0 / depth)
+                if writer is not None:
+                    writer.write(frame.image, color)
+                if options.pointcloud and frame.index % options.every == 0:
+                    K = normalised_to_pixel(K_norm, *frame.size)
+                    write_ply(tmp / "pointcloud" / f"{frame.name}.ply", *depth_to_points(depth, frame.image, K),
+                              binary=not options.ascii_ply)
+                target = gt.get(frame.name, frame.index) if gt is not None else None
+                if target is not None:
+                    drift.append((frame.index, frame.name, scaling.frame_scale(target, disp[0].cpu().numpy())))
+                times.append(frame.time)
+                count += 1
+            bar.update(len(frames))
+        bar.close()
+        if writer is not None:
+            writer.close()
+
+        outputs = folders + (["video.mp4"] if writer is not None else [])
+        if do_pose:
+            relative = np.concatenate(steps) if steps else np.zeros((0, 4, 4))
+            relative[:, :3, 3] *= s  # the sequence scale applies to translations too
+            poses = global_from_relative(relative)
+            write_kitti_poses(tmp / "trajectory_kitti.txt", poses)
+            write_tum(tmp / "trajectory_tum.txt", poses, np.asarray(times))
+            plot_topview(poses, tmp / "trajectory.png")
+            outputs += ["trajectory_kitti.txt", "trajectory_tum.txt", "trajectory.png"]
+
+        scale_info = result.to_dict()
+        if drift:
+            index, per_frame = np.array([d[0] for d in drift]), np.array([d[2] for d in drift])
+            scale_info["drift"] = {**scaling.drift_stats(per_frame, s),
+                                   "per_frame": {name: float(v) for _, name, v in drift}}
+            plot_scale_drift(index, per_frame, s, index[: len(result.frames)], tmp / "scale_drift.png")
+            outputs.append("scale_drift.png")
+        (tmp / "scale.json").write_text(json.dumps(scale_info, indent=2))
+        summary = {"input": str(source.path), "input_kind": source.kind, "model": predictor.name,
+                   "network_size": [predictor.height, predictor.width], "frames": count, "fps": fps,
+                   "scale": s, "intrinsics_normalised": K_norm.tolist(), "seconds": time.perf_counter() - start,
+                   "outputs": outputs + ["scale.json", "predict.json"], "options": asdict(options)}
+        (tmp / "predict.json").write_text(json.dumps(summary, indent=2))
+    return summary
