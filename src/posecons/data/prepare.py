@@ -1,0 +1,121 @@
+"""``posecons prepare``: turn videos or folders of frames into a dataset in the KITTI raw layout.
+
+Each input becomes one drive ``custom/custom_drive_NNNN_sync/image_02/data/<frame:010d>.png``;
+``custom/calib_cam_to_cam.txt`` holds the given intrinsics as ``P_rect_02``/``S_rect_02`` (scaled
+to the written size), and ``splits/custom/{train,val}_files.txt`` list every frame with both
+neighbours, so :class:`~posecons.data.kitti_raw.KittiRawDataset` reads the result directly.
+Frames that hardly differ from the previous kept frame (a standing camera) are dropped.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Optional
+
+import av
+import numpy as np
+from PIL import Image
+
+from ..errors import PoseconsError
+from .calib import calib_matrix, read_calib_file
+from .io import atomic_dir, load_rgb
+from .splits import SplitLine, write_split
+from .synth.rig import format_calib
+
+DATE = "custom"
+IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp"}
+
+
+def read_intrinsics_file(path: Path) -> np.ndarray:
+    """(3, 3) pixel K from a ``key: values`` file with ``K`` (9 numbers), ``P_rect_02`` or ``P2`` (12)."""
+    calib = read_calib_file(Path(path))
+    if "K" in calib:
+        return calib_matrix(calib, "K", (3, 3), Path(path))
+    for key in ("P_rect_02", "P2"):
+        if key in calib:
+            return calib_matrix(calib, key, (3, 4), Path(path))[:, :3]
+    raise PoseconsError(f"{path}: no 'K', 'P_rect_02' or 'P2' entry")
+
+
+def iter_frames(source: Path) -> Iterator[Image.Image]:
+    """RGB frames of a video file (decoded with PyAV) or of a folder of images (sorted by name)."""
+    if source.is_dir():
+        files = sorted(p for p in source.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise PoseconsError(f"{source}: no image files ({', '.join(sorted(IMAGE_SUFFIXES))})")
+        for path in files:
+            yield load_rgb(path)
+        return
+    if not source.is_file():
+        raise PoseconsError(f"{source}: input not found")
+    try:
+        with av.open(str(source)) as container:
+            if not container.streams.video:
+                raise PoseconsError(f"{source}: no video stream")
+            for frame in container.decode(video=0):
+                yield frame.to_image().convert("RGB")
+    except av.FFmpegError as exc:
+        raise PoseconsError(f"{source}: unreadable video ({exc})") from exc
+
+
+def _signature(img: Image.Image) -> np.ndarray:
+    """A small grey thumbnail (float32, [0, 1]) for the frame-difference test."""
+    return np.asarray(img.convert("L").resize((64, 48), Image.BILINEAR), dtype=np.float32) / 255.0
+
+
+def prepare(
+    inputs: list[Path],
+    out: Path,
+    intrinsics: np.ndarray,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    static_threshold: float = 0.01,
+    val_fraction: float = 0.1,
+    seed: int = 0,
+) -> dict:
+    """Write the dataset; ``intrinsics`` is the (3, 3) pixel K of the inputs' native size.
+
+    A frame is kept when its mean absolute grey difference to the last kept frame is at least
+    ``static_threshold``. All inputs must share one native size (one calibration per dataset).
+    Returns {"drives": [...], "frames": [...], "train": n, "val": n}.
+    """
+    if not inputs:
+        raise PoseconsError("prepare: no inputs given")
+    lines, counts, native = [], [], None
+    with atomic_dir(Path(out)) as tmp:
+        for index, source in enumerate(map(Path, inputs)):
+            folder = f"{DATE}/{DATE}_drive_{index:04d}_sync"
+            data = tmp / folder / "image_02" / "data"
+            data.mkdir(parents=True)
+            kept, last = 0, None
+            for img in iter_frames(source):
+                if native is None:
+                    native = img.size
+                if img.size != native:
+                    raise PoseconsError(f"{source}: frame size {img.size} differs from the first input's {native}")
+                signature = _signature(img)
+                if last is not None and np.abs(signature - last).mean() < static_threshold:
+                    continue
+                last = signature
+                size = (width or native[0], height or native[1])
+                (img if img.size == size else img.resize(size, Image.BILINEAR)).save(data / f"{kept:010d}.png", compress_level=1)
+                kept += 1
+            if kept < 3:
+                raise PoseconsError(f"{source}: only {kept} moving frames (need at least 3)")
+            lines += [SplitLine(folder, f, "l") for f in range(1, kept - 1)]
+            counts.append(kept)
+        size = (width or native[0], height or native[1])
+        k = np.array(intrinsics, dtype=np.float64)
+        k[0] *= size[0] / native[0]
+        k[1] *= size[1] / native[1]
+        p_rect = np.concatenate([k, np.zeros((3, 1))], axis=1)
+        entries = {"S_rect_02": list(size), "R_rect_00": np.eye(3).ravel(), "P_rect_02": p_rect.ravel()}
+        (tmp / DATE / "calib_cam_to_cam.txt").write_text(format_calib(entries, calib_time=None))
+        random.Random(seed).shuffle(lines)
+        n_val = int(round(len(lines) * val_fraction))
+        write_split(tmp / "splits" / "custom" / "train_files.txt", lines[n_val:])
+        write_split(tmp / "splits" / "custom" / "val_files.txt", lines[:n_val])
+    return {"drives": [f"{DATE}/{DATE}_drive_{i:04d}_sync" for i in range(len(counts))], "frames": counts,
+            "train": len(lines) - n_val, "val": n_val}

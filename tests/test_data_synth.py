@@ -1,0 +1,155 @@
+"""``synth`` end to end: the generated KITTI files agree with the generator's own geometry."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from posecons.cli import main
+from posecons.data.calib import raw_intrinsics, velo_to_image
+from posecons.data.gt import load_gt
+from posecons.data.io import load_velodyne
+from posecons.data.kitti_odometry import KittiOdometryDataset, list_sequence_frames, read_poses
+from posecons.data.kitti_raw import KittiRawDataset
+from posecons.data.oxts import oxts_to_poses, read_oxts
+from posecons.data.splits import build_split, read_split
+from posecons.data.synth import drive_folder, make_drive
+from posecons.data.synth.render import camera_depth_at
+from posecons.data.synth.rig import Rig
+
+W, H, FRAMES, SEED = 312, 96, 12, 3
+
+
+@pytest.fixture(scope="module")
+def synth(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("synth") / "data"
+    assert main(["synth", "--out", str(out), "--drives", "2", "--frames", str(FRAMES), "--seed", str(SEED),
+                 "--width", str(W), "--height", str(H), "--workers", "1"]) == 0
+    return out
+
+
+def test_layout_and_description(synth: Path) -> None:
+    info = json.loads((synth / "synth.json").read_text())
+    assert info["seed"] == SEED and (info["width"], info["height"]) == (W, H)
+    assert info["test_drives"] == [drive_folder(1)] and info["train_drives"] == [drive_folder(0)]
+    assert info["stereo_baseline_m"] == pytest.approx(0.533, abs=0.01)
+    drive = synth / drive_folder(1)
+    for sub, pattern in (("image_02/data", "*.png"), ("image_03/data", "*.png"), ("velodyne_points/data", "*.bin"), ("oxts/data", "*.txt")):
+        assert len(list((drive / sub).glob(pattern))) == FRAMES
+    assert len(list_sequence_frames(synth / "odometry", 1)) == FRAMES
+    assert len(read_split(synth / "splits" / "synth_odom" / "test_files_01.txt")) == FRAMES - 1
+    test_lines = (synth / "splits" / "synth" / "test_files.txt").read_text().splitlines()
+    assert test_lines[0] == f"{drive_folder(1)} 0000000000 l" and len(test_lines) == FRAMES
+    train = read_split(synth / "splits" / "synth" / "train_files.txt") + read_split(synth / "splits" / "synth" / "val_files.txt")
+    assert {line.folder for line in train} == {drive_folder(0)} and all(1 <= line.frame <= FRAMES - 2 for line in train)
+    scan = load_velodyne(drive / "velodyne_points" / "data" / "0000000000.bin")
+    assert scan.shape[1] == 4 and len(scan) > 10000 and np.linalg.norm(scan[:, :3], axis=1).max() <= 120.0 + 1e-3
+
+
+def test_intrinsics_scale_with_size(synth: Path) -> None:
+    k = raw_intrinsics(synth / "2020_01_01")
+    np.testing.assert_allclose(k[:2], np.array([[721.5377 / 1242, 0, 609.5593 / 1242], [0, 721.5377 / 375, 172.854 / 375]]), rtol=1e-5)
+
+
+def test_lidar_gt_matches_renderer_depth(synth: Path, tmp_path: Path) -> None:
+    """camera_z ground truth equals the renderer's exact depth along each winning point's ray."""
+    gt_file = tmp_path / "gt.npz"
+    split = synth / "splits" / "synth" / "test_files.txt"
+    assert main(["export-gt", "--data-path", str(synth), "--split-file", str(split), "--out", str(gt_file), "--depth", "camera_z"]) == 0
+    maps, lines = load_gt(gt_file)
+    assert len(maps) == FRAMES and lines[3] == f"{drive_folder(1)} 3 l" and maps[0].shape == (H, W)
+    drive, rig = make_drive(SEED, 1, FRAMES), Rig(W, H)
+    p_velo_img = velo_to_image(synth / "2020_01_01")
+    errors = []
+    for frame in (0, FRAMES - 1):
+        scan = load_velodyne(synth / drive_folder(1) / "velodyne_points" / "data" / f"{frame:010d}.bin")
+        proj = np.c_[scan[scan[:, 0] >= 0, :3], np.ones((scan[:, 0] >= 0).sum())] @ p_velo_img.T
+        uv, z = proj[:, :2] / proj[:, 2:], proj[:, 2]
+        col, row = np.round(uv[:, 0]).astype(int) - 1, np.round(uv[:, 1]).astype(int) - 1
+        inside = (z > 0) & (col >= 0) & (row >= 0) & (col < W) & (row < H)
+        order = np.argsort(z[inside])  # the nearest point of each pixel is the one exported
+        pixel = (row * W + col)[inside][order]
+        _, first = np.unique(pixel, return_index=True)
+        winners = np.nonzero(inside)[0][order][first]
+        stored = maps[frame].reshape(-1)[pixel[first]]
+        np.testing.assert_allclose(stored, z[winners], rtol=1e-5)
+        assert (maps[frame] > 0).sum() == len(first)
+        rendered = camera_depth_at(drive.prims, drive.camera_pose(rig, frame, 2), rig.k(2), uv[winners])
+        errors.append(np.abs(stored - rendered) / stored)
+    errors = np.concatenate(errors)
+    assert len(errors) > 500 and np.median(errors) < 1e-3
+    # the default Eigen depth is LiDAR x: about 0.27 m more than camera z (the sensor sits behind)
+    velo_file = tmp_path / "gt_velo.npz"
+    assert main(["export-gt", "--data-path", str(synth), "--split-file", str(split), "--out", str(velo_file)]) == 0
+    velo, _ = load_gt(velo_file)
+    both = (velo[0] > 0) & (maps[0] > 0)
+    assert np.median(velo[0][both] - maps[0][both]) == pytest.approx(0.27, abs=0.02)
+
+
+def test_oxts_and_odometry_poses_reproduce_trajectory(synth: Path) -> None:
+    drive, rig = make_drive(SEED, 0, FRAMES), Rig(W, H)
+    true_imu = drive.trajectory.imu_poses
+    packets = read_oxts(sorted((synth / drive_folder(0) / "oxts" / "data").glob("*.txt")))
+    assert packets.shape == (FRAMES, 30)
+    np.testing.assert_allclose(oxts_to_poses(packets), _relative_world(true_imu), atol=1e-5)
+    speed = np.hypot(packets[:, 6], packets[:, 7]) / 10  # m/s at 10 Hz → m per frame
+    assert 0.4 < speed.mean() < 1.6
+    cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])
+    np.testing.assert_allclose(read_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0, atol=1e-6)
+
+
+def _relative_world(poses: np.ndarray) -> np.ndarray:
+    """OXTS poses keep the world axes (east, north, up) and move the origin to the first position."""
+    out = poses.copy()
+    out[:, :3, 3] -= poses[0, :3, 3]
+    return out
+
+
+def test_raw_dataset_sizes_flip_and_determinism(synth: Path) -> None:
+    split = synth / "splits" / "synth" / "train_files.txt"
+    plain = KittiRawDataset(synth, split, H // 2, W // 2, train=False)
+    sample = plain[0]
+    assert sample["frames"].shape == (3, 3, H // 2, W // 2) and sample["frames"].dtype == torch.float32
+    np.testing.assert_allclose(sample["intrinsics"].numpy(), raw_intrinsics(synth / "2020_01_01", 2 if sample["side"] == "l" else 3))
+    assert sample["color_aug"].tolist() == [1, 1, 1, 0]
+    flipped = KittiRawDataset(synth, split, H // 2, W // 2, flip_prob=1.0, jitter_prob=0.0)[0]
+    assert torch.equal(flipped["frames"], sample["frames"].flip(-1))
+    assert flipped["intrinsics"][0, 2].item() == pytest.approx(1 - sample["intrinsics"][0, 2].item())
+    assert not torch.equal(sample["frames"][1], sample["frames"][0])  # the neighbour frames differ
+    augmented = KittiRawDataset(synth, split, H // 2, W // 2, seed=7, flip_prob=0.5, jitter_prob=1.0)
+    draws = [augmented[i]["color_aug"] for i in range(3)]
+    again = KittiRawDataset(synth, split, H // 2, W // 2, seed=7, flip_prob=0.5, jitter_prob=1.0)
+    assert all(torch.equal(a, again[i]["color_aug"]) for i, a in enumerate(draws))
+    assert all(0.8 <= v <= 1.2 for d in draws for v in d[:3].tolist()) and all(abs(d[3].item()) <= 0.1 for d in draws)
+    again.set_epoch(1)
+    assert not torch.equal(again[0]["color_aug"], draws[0])
+
+
+def test_odometry_dataset(synth: Path) -> None:
+    lines = [f"1 {f} l" for f in range(1, FRAMES - 1)]
+    ds = KittiOdometryDataset(synth / "odometry", lines, H, W, train=False)
+    sample = ds[0]
+    assert sample["frames"].shape == (3, 3, H, W) and sample["folder"] == "1"
+    np.testing.assert_allclose(sample["intrinsics"].numpy(), raw_intrinsics(synth / "2020_01_01"), rtol=1e-5)
+    raw = KittiRawDataset(synth, [f"{drive_folder(1)} 1 l"], H, W, train=False)[0]
+    assert torch.equal(sample["frames"], raw["frames"])
+
+
+def test_build_split_on_synth(synth: Path) -> None:
+    train, val = build_split(synth, test_scenes={drive_folder(1).split("/")[1].removesuffix("_sync")}, val_fraction=0.25)
+    assert len(train) + len(val) == 2 * (FRAMES - 2)  # both cameras, frames with both neighbours
+    assert {line.folder for line in train + val} == {drive_folder(0)}
+
+
+@pytest.mark.slow
+def test_synth_is_deterministic(synth: Path, tmp_path: Path) -> None:
+    out = tmp_path / "again"
+    assert main(["synth", "--out", str(out), "--drives", "2", "--frames", str(FRAMES), "--seed", str(SEED),
+                 "--width", str(W), "--height", str(H), "--workers", "2"]) == 0
+    for rel in (f"{drive_folder(0)}/image_02/data/0000000005.png", f"{drive_folder(1)}/velodyne_points/data/0000000007.bin",
+                "odometry/poses/01.txt", "splits/synth/train_files.txt", "synth.json"):
+        assert (out / rel).read_bytes() == (synth / rel).read_bytes(), rel
