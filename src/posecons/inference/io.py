@@ -62,6 +62,8 @@ class FrameSource:
         elif self.path.suffix.lower() in IMAGE_EXTENSIONS:
             self.kind, self.images = "image", [self.path]
         elif self.path.suffix.lower() in VIDEO_EXTENSIONS:
+            if self.path.stat().st_size == 0:
+                raise PoseconsError(f"{self.path}: the video file is empty")
             self.kind, self.images = "video", []
             self.video_fps, self.num_frames = self._probe_video()
         else:

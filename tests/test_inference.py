@@ -1,0 +1,359 @@
+"""Inference and export: outputs per frame at the original size, scale handling, trajectories,
+point clouds, ONNX parity and clear errors for bad input (small model, tiny frames)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import av
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+from posecons.checkpoint import load_model, save_checkpoint
+from posecons.cli import main
+from posecons.config import load_config
+from posecons.evaluation.trajectory_io import read_kitti_poses, read_tum
+from posecons.geometry import backproject
+from posecons.inference import PredictOptions, export_model, load_predictor, predict
+from posecons.inference.backend import Predictor
+from posecons.inference.camera import read_calib_intrinsics, resolve_intrinsics
+from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
+from posecons.inference.scale import camera_height
+from posecons.model import PoseConsModel
+
+SMALL = ["model.height=64", "model.width=96", "model.pretrained=false", "model.num_layers=10"]
+FRAMES, H, W = 5, 50, 70  # original size: not the network's 64×96, not a multiple of 32
+
+
+def _texture_frames(count: int, h: int, w: int) -> np.ndarray:
+    """(count, h, w, 3) uint8 views of one random texture sliding 3 px per frame (a panning camera)."""
+    rng = np.random.default_rng(0)
+    tex = (rng.random((h // 4 + 1, (w + 3 * count) // 4 + 1, 3)) * 255).astype(np.uint8)
+    tex = np.asarray(Image.fromarray(tex).resize((tex.shape[1] * 4, tex.shape[0] * 4), Image.BILINEAR))
+    return np.stack([tex[:h, 3 * i : 3 * i + w] for i in range(count)])
+
+
+@pytest.fixture(scope="module")
+def ckpt(tmp_path_factory) -> Path:
+    """A checkpoint after two optimiser steps on sliding-texture triplets."""
+    torch.manual_seed(0)
+    cfg = load_config(overrides=SMALL)
+    model = PoseConsModel(cfg)
+    seq = torch.from_numpy(_texture_frames(3, 64, 96)).permute(0, 3, 1, 2).float() / 255
+    batch = {"frames": seq[[1, 0, 2]][None], "intrinsics": torch.tensor([[[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]]])}
+    opt = torch.optim.Adam(model.parameters(), 1e-3)
+    for _ in range(2):
+        opt.zero_grad()
+        model(batch)[1]["total"].backward()
+        opt.step()
+    path = tmp_path_factory.mktemp("ckpt") / "model.pt"
+    save_checkpoint(path, {"config": cfg.to_dict(), "model": model.state_dict()})
+    return path
+
+
+@pytest.fixture(scope="module")
+def frames_dir(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("frames")
+    for i, img in enumerate(_texture_frames(FRAMES, H, W)):
+        Image.fromarray(img).save(folder / f"{i:010d}.png")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory) -> Path:
+    """A 6-frame, 10 fps H.264 MP4 of 48×80 (even sizes, as yuv420p needs)."""
+    path = tmp_path_factory.mktemp("video") / "clip.mp4"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=10)
+        stream.width, stream.height, stream.pix_fmt = 80, 48, "yuv420p"
+        for img in _texture_frames(6, 48, 80):
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")))
+        container.mux(stream.encode())
+    return path
+
+
+@pytest.fixture(scope="module")
+def base_run(ckpt, frames_dir, tmp_path_factory) -> Path:
+    """Unscaled prediction over the frame folder, shared by the tests that compare against it."""
+    out = tmp_path_factory.mktemp("base")
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out),
+                 "--quiet", "--batch-size", "2"]) == 0
+    return out
+
+
+def _leftovers(out: Path) -> list[str]:
+    return sorted(p.name for p in out.iterdir()) if out.exists() else []
+
+
+# ----------------------------------------------------------------------------- predict
+
+def test_predict_folder_writes_every_frame_at_original_size(base_run):
+    names = [f"{i:010d}" for i in range(FRAMES)]
+    for name in names:
+        depth = np.load(base_run / "depth" / f"{name}.npy")
+        assert depth.dtype == np.float32 and depth.shape == (H, W)
+        assert np.isfinite(depth).all() and (depth > 0).all()
+        png = np.asarray(Image.open(base_run / "depth_png" / f"{name}.png"))
+        assert png.dtype == np.uint16 and png.shape == (H, W)
+        np.testing.assert_array_equal(png, np.clip(np.round(depth * 256), 0, 65535).astype(np.uint16))
+        color = Image.open(base_run / "depth_color" / f"{name}.png")
+        assert color.size == (W, H) and color.mode == "RGB"
+    assert sorted(p.stem for p in (base_run / "depth").iterdir()) == names
+    poses = read_kitti_poses(base_run / "trajectory_kitti.txt")
+    stamps, tum = read_tum(base_run / "trajectory_tum.txt")
+    assert poses.shape == (FRAMES, 4, 4) and tum.shape == (FRAMES, 4, 4)
+    np.testing.assert_allclose(poses[0], np.eye(4), atol=1e-9)
+    np.testing.assert_allclose(tum[:, :3, 3], poses[:, :3, 3], atol=1e-8)
+    np.testing.assert_allclose(stamps, np.arange(FRAMES) / 10)  # default 10 fps for folders
+    summary = json.loads((base_run / "predict.json").read_text())
+    assert summary["frames"] == FRAMES and summary["network_size"] == [64, 96]
+    assert not [n for n in _leftovers(base_run) if n.startswith(".partial")]
+
+
+def test_trajectory_chains_the_pose_net_steps(ckpt, frames_dir, base_run):
+    """G_{i+1} = G_i · inv(T_{i+1←i}) with T from the pair (I_i, I_{i+1})."""
+    predictor = load_predictor(ckpt)
+    from posecons.inference.io import FrameSource, resize_rgb
+
+    images = np.stack([resize_rgb(f.image, 64, 96) for f in FrameSource(frames_dir)])
+    steps = predictor.pose(images[:-1], images[1:])
+    poses = read_kitti_poses(base_run / "trajectory_kitti.txt")
+    for i, step in enumerate(steps):
+        np.testing.assert_allclose(poses[i + 1], poses[i] @ np.linalg.inv(step), atol=1e-6)
+
+
+def test_predict_video_streams_frames_and_writes_side_by_side(ckpt, video, tmp_path):
+    out = tmp_path / "out"
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(video), "--out", str(out), "--quiet",
+                 "--batch-size", "4"]) == 0
+    assert sorted(p.name for p in (out / "depth").iterdir()) == [f"{i:06d}.npy" for i in range(6)]
+    assert np.load(out / "depth" / "000005.npy").shape == (48, 80)
+    with av.open(str(out / "video.mp4")) as container:
+        decoded = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    assert len(decoded) == 6 and decoded[0].shape == (48, 160, 3)
+    stamps, poses = read_tum(out / "trajectory_tum.txt")
+    assert len(poses) == 6
+    np.testing.assert_allclose(stamps, np.arange(6) / 10, atol=1e-6)  # from the video's timestamps
+
+
+def test_scale_multiplies_depth_and_translations(ckpt, frames_dir, base_run, tmp_path):
+    out = tmp_path / "out"
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
+                 "--batch-size", "2", "--scale", "2.5"]) == 0
+    for i in range(FRAMES):
+        base = np.load(base_run / "depth" / f"{i:010d}.npy")
+        np.testing.assert_array_equal(np.load(out / "depth" / f"{i:010d}.npy"), base * np.float32(2.5))
+    base_poses, poses = (read_kitti_poses(d / "trajectory_kitti.txt") for d in (base_run, out))
+    np.testing.assert_allclose(poses[:, :3, 3], 2.5 * base_poses[:, :3, 3], rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(poses[:, :3, :3], base_poses[:, :3, :3], atol=1e-12)
+    info = json.loads((out / "scale.json").read_text())
+    assert info["method"] == "given" and info["value"] == 2.5
+
+
+def test_calibration_from_ground_truth_recovers_a_known_scale(ckpt, frames_dir, base_run, tmp_path):
+    """GT = k × the model's own prediction → scale k and zero drift; frames without GT are skipped."""
+    k = 7.3
+    gt = {f"{i:06d}": k * np.load(base_run / "depth" / f"{i:010d}.npy") for i in range(FRAMES) if i != 1}
+    np.savez(tmp_path / "gt.npz", lines=np.array(["seq 0 l"]), **gt)
+    out = tmp_path / "out"
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
+                 "--batch-size", "2", "--calibrate-gt", str(tmp_path / "gt.npz"), "--calibrate-frames", "2"]) == 0
+    info = json.loads((out / "scale.json").read_text())
+    assert info["method"] == "ground_truth" and info["frames_used"] == ["0000000000", "0000000002"]
+    assert info["value"] == pytest.approx(k, rel=1e-5)
+    assert info["drift"]["frames"] == FRAMES - 1
+    assert info["drift"]["cv"] < 1e-5 and info["drift"]["max_rel_deviation"] < 1e-5
+    assert (out / "scale_drift.png").is_file()
+    np.testing.assert_allclose(np.load(out / "depth" / "0000000003.npy"), gt["000003"], rtol=1e-4)
+
+
+def test_calibration_from_16bit_png_folder(ckpt, frames_dir, base_run, tmp_path):
+    """KITTI-style PNGs (depth × 256, 0 invalid) named like the frames; quantisation limits accuracy."""
+    k = 40.0
+    gt_dir = tmp_path / "gt"
+    gt_dir.mkdir()
+    for i in (2, 3, 4):
+        depth = k * np.load(base_run / "depth" / f"{i:010d}.npy")
+        png = np.round(depth * 256).astype(np.uint16)
+        png[:5] = 0  # invalid rows are ignored
+        Image.fromarray(png).save(gt_dir / f"{i:010d}.png")
+    out = tmp_path / "out"
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
+                 "--calibrate-gt", str(gt_dir), "--calibrate-frames", "1"]) == 0
+    info = json.loads((out / "scale.json").read_text())
+    assert info["frames_used"] == ["0000000002"] and info["value"] == pytest.approx(k, rel=1e-3)
+    assert info["drift"]["frames"] == 3 and info["drift"]["max_rel_deviation"] < 1e-3
+
+
+def _plane_depth(h: int, w: int, K: np.ndarray, height: float) -> np.ndarray:
+    """Depth of a flat ground ``height`` below a level camera, a wall at 30 where the ray misses it."""
+    v = np.arange(h, dtype=np.float64)[:, None].repeat(w, 1)
+    down = (v - K[1, 2]) / K[1, 1]  # y / z of each pixel's ray
+    with np.errstate(divide="ignore"):
+        depth = np.where(down > 0, height / down, np.inf)
+    return np.minimum(depth, 30.0)
+
+
+def test_camera_height_fit_recovers_a_known_height():
+    h, w = 120, 400
+    K = np.array([[0.58 * w, 0, 0.5 * w], [0, 1.92 * h, 0.5 * h], [0, 0, 1]])
+    depth = _plane_depth(h, w, K, 1.65) / 4.0  # the model's unknown scale: 4
+    depth *= 1 + 0.002 * np.random.default_rng(0).standard_normal(depth.shape)
+    depth[100:, 150:190] = 1.0  # an obstacle inside the ground region: RANSAC ignores it
+    assert camera_height(depth, K) == pytest.approx(1.65 / 4.0, rel=0.01)
+
+
+class PlanePredictor(Predictor):
+    """Stands in for a network: the disparity of a flat ground 0.5 below the camera at network size."""
+
+    name, height, width, has_pose = "plane", 64, 96, False
+
+    def disparity(self, images: np.ndarray) -> torch.Tensor:
+        K = np.array([[0.58 * self.width, 0, 0.5 * self.width], [0, 1.92 * self.height, 0.5 * self.height], [0, 0, 1]])
+        disp = 1.0 / _plane_depth(self.height, self.width, K, 0.5)
+        return torch.from_numpy(np.repeat(disp[None, None], len(images), 0).astype(np.float32))
+
+
+def test_camera_height_calibration_in_predict(frames_dir, tmp_path):
+    """Frames of any size: K (normalised KITTI default) is scaled to the original image."""
+    summary = predict(PlanePredictor(), frames_dir, tmp_path / "out",
+                      PredictOptions(camera_height=1.5, calibrate_frames=3, progress=False))
+    info = json.loads((tmp_path / "out" / "scale.json").read_text())
+    assert info["method"] == "camera_height" and len(info["frames_used"]) == 3
+    assert info["value"] == pytest.approx(3.0, rel=0.03) and summary["scale"] == info["value"]
+    assert not (tmp_path / "out" / "trajectory_kitti.txt").exists()  # no pose network
+
+
+def test_intrinsics_from_flags_and_calibration_files(tmp_path):
+    K = resolve_intrinsics("700,710,320,100", None, 200, 640)
+    np.testing.assert_allclose(K, [[700 / 640, 0, 0.5], [0, 710 / 200, 0.5], [0, 0, 1]])
+    (tmp_path / "calib.txt").write_text("P0: 7 0 6 0 0 7 1 0 0 0 1 0\nP2: 718.9 0 607.2 45.4 0 718.9 185.2 -0.1 0 0 1 0\n")
+    np.testing.assert_allclose(read_calib_intrinsics(tmp_path / "calib.txt"),
+                               [[718.9, 0, 607.2], [0, 718.9, 185.2], [0, 0, 1]])
+    np.testing.assert_allclose(resolve_intrinsics(None, None, 10, 10), [[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]],
+                               rtol=1e-6)
+
+
+# ----------------------------------------------------------------------------- point clouds
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_ply_has_one_vertex_per_valid_pixel(tmp_path, binary):
+    rng = np.random.default_rng(1)
+    depth = rng.uniform(1, 10, (6, 9)).astype(np.float32)
+    depth[0, :4] = 0
+    depth[2, 3] = np.inf
+    image = rng.integers(0, 256, (6, 9, 3), dtype=np.uint8)
+    K = np.array([[5.0, 0, 4], [0, 6, 3], [0, 0, 1]])
+    points, colors = depth_to_points(depth, image, K)
+    write_ply(tmp_path / "c.ply", points, colors, binary=binary)
+    back, back_colors = read_ply(tmp_path / "c.ply")
+    assert len(back) == 6 * 9 - 5
+    ref = backproject(torch.from_numpy(np.where(np.isfinite(depth), depth, 0))[None, None].double(),
+                      torch.from_numpy(K)[None])[0].T.numpy()
+    valid = (np.isfinite(depth) & (depth > 0)).ravel()
+    np.testing.assert_allclose(back, ref[valid], rtol=1e-5)
+    np.testing.assert_array_equal(back_colors, image.reshape(-1, 3)[valid])
+
+
+def test_predict_pointcloud_every_kth_frame(ckpt, frames_dir, tmp_path):
+    out = tmp_path / "out"
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
+                 "--pointcloud", "--every", "2", "--no-trajectory", "--intrinsics", "40,60,35,25"]) == 0
+    plys = sorted((out / "pointcloud").iterdir())
+    assert [p.stem for p in plys] == ["0000000000", "0000000002", "0000000004"]
+    points, _ = read_ply(plys[1])
+    assert len(points) == H * W
+    depth = np.load(out / "depth" / "0000000002.npy")
+    np.testing.assert_allclose(points[:, 2], depth.ravel(), rtol=1e-6)
+
+
+# ----------------------------------------------------------------------------- export
+
+def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, base_run, tmp_path):
+    info = export_model(ckpt, tmp_path / "export")
+    assert max(info["max_abs_diff"]["depth"].values()) < 1e-4
+    assert max(info["max_abs_diff"]["pose"].values()) < 1e-4
+    assert {p.name for p in (tmp_path / "export").iterdir()} == {"depth.onnx", "pose.onnx", "weights.safetensors",
+                                                                  "export.json"}
+    model, _ = load_model(tmp_path / "export" / "weights.safetensors")
+    reference, _ = load_model(ckpt)
+    for a, b in zip(model.state_dict().values(), reference.state_dict().values()):
+        assert torch.equal(a, b)
+    out = tmp_path / "out"
+    assert main(["predict", "--checkpoint", str(tmp_path / "export" / "depth.onnx"), "--input", str(frames_dir),
+                 "--out", str(out), "--quiet", "--batch-size", "3"]) == 0  # another batch size: dynamic axis
+    for i in range(FRAMES):
+        np.testing.assert_allclose(np.load(out / "depth" / f"{i:010d}.npy"),
+                                   np.load(base_run / "depth" / f"{i:010d}.npy"), rtol=1e-4)
+    np.testing.assert_allclose(read_kitti_poses(out / "trajectory_kitti.txt"),
+                               read_kitti_poses(base_run / "trajectory_kitti.txt"), atol=1e-5)
+    with pytest.raises(Exception, match="differs from PyTorch"):  # a tolerance nothing meets fails the export
+        export_model(ckpt, tmp_path / "strict", tolerance=-1.0)
+    assert _leftovers(tmp_path / "strict") == []
+
+
+# ----------------------------------------------------------------------------- bad input
+
+class Payload:
+    """A pickle that would create a folder when unpickled."""
+
+    def __init__(self, target: Path):
+        self.target = target
+
+    def __reduce__(self):
+        return os.makedirs, (str(self.target),)
+
+
+def _fails(args: list[str], out: Path, capsys, *fragments: str) -> None:
+    assert main(args + ["--out", str(out)] + (["--quiet"] if args[0] == "predict" else [])) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in err
+    assert not [n for n in _leftovers(out) if n != ".keep"]  # nothing presented as output
+
+
+def test_bad_inputs_give_one_clear_message_and_no_outputs(ckpt, frames_dir, tmp_path, capsys):
+    predict_args = ["predict", "--checkpoint", str(ckpt), "--input"]
+    empty = tmp_path / "empty.mp4"
+    empty.write_bytes(b"")
+    _fails(predict_args + [str(empty)], tmp_path / "o1", capsys, str(empty), "empty")
+    garbage = tmp_path / "garbage.mp4"
+    garbage.write_bytes(np.random.default_rng(0).bytes(4096))
+    _fails(predict_args + [str(garbage)], tmp_path / "o2", capsys, str(garbage), "video")
+    text = tmp_path / "notes.txt"
+    text.write_text("hello")
+    _fails(predict_args + [str(text)], tmp_path / "o3", capsys, str(text), "unsupported")
+    no_images = tmp_path / "no_images"
+    no_images.mkdir()
+    _fails(predict_args + [str(no_images)], tmp_path / "o4", capsys, str(no_images), "no images")
+
+    cfg = load_config(overrides=SMALL[:-1] + ["model.num_layers=18"]).to_dict()
+    wrong = tmp_path / "wrong.pt"
+    save_checkpoint(wrong, {"config": cfg, "model": torch.load(ckpt, weights_only=True)["model"]})
+    _fails(["predict", "--checkpoint", str(wrong), "--input", str(frames_dir)], tmp_path / "o5", capsys,
+           str(wrong), "architecture")
+
+    evil = tmp_path / "evil.pt"
+    torch.save({"config": {}, "model": Payload(tmp_path / "pwned")}, evil)
+    _fails(["predict", "--checkpoint", str(evil), "--input", str(frames_dir)], tmp_path / "o6", capsys,
+           str(evil), "refused")
+    assert not (tmp_path / "pwned").exists()
+    _fails(["export", "--checkpoint", str(evil)], tmp_path / "o7", capsys, str(evil))
+
+
+def test_truncated_video_fails_without_partial_outputs(ckpt, video, tmp_path, capsys):
+    """A video whose data breaks off mid-way: an error, and OUT keeps no half-written results."""
+    broken = tmp_path / "broken.mp4"
+    broken.write_bytes(video.read_bytes()[: video.stat().st_size // 3])
+    out = tmp_path / "out"
+    code = main(["predict", "--checkpoint", str(ckpt), "--input", str(broken), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    if code == 0:  # the decoder may recover the frames before the cut; then all must be complete
+        assert len(list((out / "depth").iterdir())) == json.loads((out / "predict.json").read_text())["frames"]
+    else:
+        assert code == 2 and str(broken) in err and _leftovers(out) == []
