@@ -20,31 +20,44 @@ from posecons.evaluation.trajectory_io import read_kitti_poses, read_tum
 from posecons.geometry import backproject
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor
+from posecons.data.synth import drive_folder, generate_synth
+from posecons.inference.io import FrameSource, resize_rgb
 from posecons.inference.camera import read_calib_intrinsics, resolve_intrinsics
 from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
 from posecons.inference.scale import camera_height
 from posecons.model import PoseConsModel
 
 SMALL = ["model.height=64", "model.width=96", "model.pretrained=false", "model.num_layers=10"]
-FRAMES, H, W = 5, 50, 70  # original size: not the network's 64×96, not a multiple of 32
-
-
-def _texture_frames(count: int, h: int, w: int) -> np.ndarray:
-    """(count, h, w, 3) uint8 views of one random texture sliding 3 px per frame (a panning camera)."""
-    rng = np.random.default_rng(0)
-    tex = (rng.random((h // 4 + 1, (w + 3 * count) // 4 + 1, 3)) * 255).astype(np.uint8)
-    tex = np.asarray(Image.fromarray(tex).resize((tex.shape[1] * 4, tex.shape[0] * 4), Image.BILINEAR))
-    return np.stack([tex[:h, 3 * i : 3 * i + w] for i in range(count)])
+FRAMES, H, W = 6, 60, 100  # original size: not the network's 64×96, not a multiple of 32
 
 
 @pytest.fixture(scope="module")
-def ckpt(tmp_path_factory) -> Path:
-    """A checkpoint after two optimiser steps on sliding-texture triplets."""
+def synth(tmp_path_factory) -> Path:
+    """A tiny synthetic KITTI-format dataset: 2 drives × 6 frames of 100×60."""
+    root = tmp_path_factory.mktemp("synth") / "data"
+    generate_synth(root, drives=2, frames=FRAMES, width=W, height=H, workers=1)
+    return root
+
+
+def _drive(synth: Path, index: int) -> Path:
+    return synth / drive_folder(index)
+
+
+def _frames(synth: Path, index: int) -> np.ndarray:
+    """(FRAMES, H, W, 3) uint8 left-camera frames of one synthetic drive."""
+    return np.stack([np.asarray(Image.open(p).convert("RGB"))
+                     for p in sorted((_drive(synth, index) / "image_02" / "data").iterdir())])
+
+
+@pytest.fixture(scope="module")
+def ckpt(synth, tmp_path_factory) -> Path:
+    """A checkpoint after two optimiser steps on frame triplets (0, −1, +1) of drive 0."""
     torch.manual_seed(0)
     cfg = load_config(overrides=SMALL)
     model = PoseConsModel(cfg)
-    seq = torch.from_numpy(_texture_frames(3, 64, 96)).permute(0, 3, 1, 2).float() / 255
-    batch = {"frames": seq[[1, 0, 2]][None], "intrinsics": torch.tensor([[[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]]])}
+    seq = torch.from_numpy(np.stack([resize_rgb(f, 64, 96) for f in _frames(synth, 0)]))
+    K = resolve_intrinsics(None, _drive(synth, 0).parent / "calib_cam_to_cam.txt", H, W)
+    batch = {"frames": torch.stack([seq[[1, 0, 2]], seq[[3, 2, 4]]]), "intrinsics": torch.tensor(K).float().expand(2, 3, 3)}
     opt = torch.optim.Adam(model.parameters(), 1e-3)
     for _ in range(2):
         opt.zero_grad()
@@ -56,21 +69,18 @@ def ckpt(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def frames_dir(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("frames")
-    for i, img in enumerate(_texture_frames(FRAMES, H, W)):
-        Image.fromarray(img).save(folder / f"{i:010d}.png")
-    return folder
+def frames_dir(synth) -> Path:
+    return _drive(synth, 1) / "image_02" / "data"
 
 
 @pytest.fixture(scope="module")
-def video(tmp_path_factory) -> Path:
-    """A 6-frame, 10 fps H.264 MP4 of 48×80 (even sizes, as yuv420p needs)."""
+def video(synth, tmp_path_factory) -> Path:
+    """Drive 1's frames as a 10 fps H.264 MP4."""
     path = tmp_path_factory.mktemp("video") / "clip.mp4"
     with av.open(str(path), "w") as container:
         stream = container.add_stream("libx264", rate=10)
-        stream.width, stream.height, stream.pix_fmt = 80, 48, "yuv420p"
-        for img in _texture_frames(6, 48, 80):
+        stream.width, stream.height, stream.pix_fmt = W, H, "yuv420p"
+        for img in _frames(synth, 1):
             container.mux(stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")))
         container.mux(stream.encode())
     return path
@@ -117,8 +127,7 @@ def test_predict_folder_writes_every_frame_at_original_size(base_run):
 def test_trajectory_chains_the_pose_net_steps(ckpt, frames_dir, base_run):
     """G_{i+1} = G_i · inv(T_{i+1←i}) with T from the pair (I_i, I_{i+1})."""
     predictor = load_predictor(ckpt)
-    from posecons.inference.io import FrameSource, resize_rgb
-
+    
     images = np.stack([resize_rgb(f.image, 64, 96) for f in FrameSource(frames_dir)])
     steps = predictor.pose(images[:-1], images[1:])
     poses = read_kitti_poses(base_run / "trajectory_kitti.txt")
@@ -130,14 +139,14 @@ def test_predict_video_streams_frames_and_writes_side_by_side(ckpt, video, tmp_p
     out = tmp_path / "out"
     assert main(["predict", "--checkpoint", str(ckpt), "--input", str(video), "--out", str(out), "--quiet",
                  "--batch-size", "4"]) == 0
-    assert sorted(p.name for p in (out / "depth").iterdir()) == [f"{i:06d}.npy" for i in range(6)]
-    assert np.load(out / "depth" / "000005.npy").shape == (48, 80)
+    assert sorted(p.name for p in (out / "depth").iterdir()) == [f"{i:06d}.npy" for i in range(FRAMES)]
+    assert np.load(out / "depth" / "000005.npy").shape == (H, W)
     with av.open(str(out / "video.mp4")) as container:
         decoded = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
-    assert len(decoded) == 6 and decoded[0].shape == (48, 160, 3)
+    assert len(decoded) == FRAMES and decoded[0].shape == (H, 2 * W, 3)
     stamps, poses = read_tum(out / "trajectory_tum.txt")
-    assert len(poses) == 6
-    np.testing.assert_allclose(stamps, np.arange(6) / 10, atol=1e-6)  # from the video's timestamps
+    assert len(poses) == FRAMES
+    np.testing.assert_allclose(stamps, np.arange(FRAMES) / 10, atol=1e-6)  # from the video's timestamps
 
 
 def test_scale_multiplies_depth_and_translations(ckpt, frames_dir, base_run, tmp_path):
@@ -259,16 +268,21 @@ def test_ply_has_one_vertex_per_valid_pixel(tmp_path, binary):
     np.testing.assert_array_equal(back_colors, image.reshape(-1, 3)[valid])
 
 
-def test_predict_pointcloud_every_kth_frame(ckpt, frames_dir, tmp_path):
+def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path):
     out = tmp_path / "out"
+    calib = _drive(synth, 1).parent / "calib_cam_to_cam.txt"  # P_rect_02 in pixels of these frames
     assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
-                 "--pointcloud", "--every", "2", "--no-trajectory", "--intrinsics", "40,60,35,25"]) == 0
+                 "--pointcloud", "--every", "2", "--no-trajectory", "--calib", str(calib)]) == 0
     plys = sorted((out / "pointcloud").iterdir())
     assert [p.stem for p in plys] == ["0000000000", "0000000002", "0000000004"]
-    points, _ = read_ply(plys[1])
+    points, colors = read_ply(plys[1])
     assert len(points) == H * W
     depth = np.load(out / "depth" / "0000000002.npy")
+    K = read_calib_intrinsics(calib)
     np.testing.assert_allclose(points[:, 2], depth.ravel(), rtol=1e-6)
+    np.testing.assert_allclose(points[:, 0], (np.arange(H * W) % W - K[0, 2]) / K[0, 0] * depth.ravel(), rtol=1e-4,
+                               atol=1e-6)
+    np.testing.assert_array_equal(colors, _frames(synth, 1)[2].reshape(-1, 3))
 
 
 # ----------------------------------------------------------------------------- export
