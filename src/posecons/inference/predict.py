@@ -59,7 +59,7 @@ class PredictOptions:
     fps: float = DEFAULT_FPS  # timestamps of image folders
     progress: bool = True
 
-    def check(self) -> "PredictOptions":
+    def check(self) -> PredictOptions:
         chosen = [n for n in ("scale", "calibrate_gt", "camera_height") if getattr(self, n) is not None]
         if len(chosen) > 1:
             raise PoseconsError(f"choose one way to set the scale, got {', '.join(chosen)}")
