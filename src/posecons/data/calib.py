@@ -113,3 +113,10 @@ def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:
     r_rect[:3, :3] = calib_matrix(cam_to_cam(date_dir), "R_rect_00", (3, 3), source)
     velo_file = date_dir / "calib_velo_to_cam.txt"
     return p_rect @ r_rect @ rigid(read_calib_file(velo_file), velo_file)
+
+
+def format_calib(entries: dict, calib_time: str | None = "01-Jan-2020 00:00:00") -> str:
+    """KITTI calibration text: optional ``calib_time`` then ``key: v v v`` lines (%e numbers)."""
+    lines = [f"calib_time: {calib_time}"] if calib_time else []
+    lines += [f"{key}: " + " ".join(f"{float(v):e}" for v in values) for key, values in entries.items()]
+    return "\n".join(lines) + "\n"

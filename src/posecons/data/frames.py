@@ -18,8 +18,8 @@ from PIL import Image
 from torch.utils.data import Dataset
 
 from ..errors import PoseconsError
-from .calib import KITTI_FIXED_K
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
+from .calib import KITTI_FIXED_K
 from .io import load_rgb
 from .splits import SplitLine, SplitSource, read_split
 

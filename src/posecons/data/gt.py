@@ -16,7 +16,7 @@ from PIL import Image
 from ..errors import PoseconsError
 from .calib import raw_projection, velo_to_image
 from .io import atomic_file, load_velodyne, require_file
-from .kitti_raw import CAMERA
+from .splits import SIDE_TO_CAMERA as CAMERA
 from .splits import SplitSource, read_split
 
 DepthKind = Literal["velo_x", "camera_z"]

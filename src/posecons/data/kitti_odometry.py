@@ -11,9 +11,8 @@ from ..errors import PoseconsError
 from .calib import calib_matrix, normalised_k, read_calib_file
 from .frames import FrameDataset
 from .io import require_file
+from .splits import SIDE_TO_CAMERA as CAMERA
 from .splits import SplitLine
-
-CAMERA = {"l": 2, "r": 3}
 
 
 def sequence_dir(data_path: Path, sequence: int | str) -> Path:

@@ -9,9 +9,8 @@ import numpy as np
 
 from .calib import raw_intrinsics
 from .frames import FrameDataset
+from .splits import SIDE_TO_CAMERA as CAMERA
 from .splits import SplitLine
-
-CAMERA = {"l": 2, "r": 3}
 
 
 class KittiRawDataset(FrameDataset):

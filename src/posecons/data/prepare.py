@@ -19,10 +19,9 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-from .calib import calib_matrix, read_calib_file
+from .calib import calib_matrix, format_calib, read_calib_file
 from .io import atomic_dir, load_rgb
 from .splits import SplitLine, write_split
-from .synth.rig import format_calib
 
 DATE = "custom"
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp"}

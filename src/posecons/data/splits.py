@@ -16,6 +16,7 @@ from ..errors import PoseconsError
 from .io import atomic_file, require_file
 
 SIDES = ("l", "r")
+SIDE_TO_CAMERA = {"l": 2, "r": 3}  # left / right colour camera
 
 
 @dataclass(frozen=True)

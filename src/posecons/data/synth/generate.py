@@ -27,6 +27,7 @@ import numpy as np
 from PIL import Image
 
 from ...errors import PoseconsError
+from ..calib import format_calib
 from ..io import atomic_dir
 from ..kitti_odometry import write_poses
 from ..oxts import DATAFORMAT, format_oxts, poses_to_oxts
@@ -34,7 +35,7 @@ from ..splits import SplitLine, write_split
 from .motion import Trajectory, extended_path, make_trajectory
 from .primitives import Primitive
 from .render import Lidar, Shading, render_camera, shading_tables
-from .rig import IMU_TO_VELO, KITTI_SIZE, VELO_TO_CAM, Rig, format_calib
+from .rig import IMU_TO_VELO, KITTI_SIZE, VELO_TO_CAM, Rig
 from .scene import build_scene, make_textures
 
 DATE = "2020_01_01"

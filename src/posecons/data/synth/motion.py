@@ -48,10 +48,12 @@ def _follow(target: np.ndarray, start: float, max_step: float) -> np.ndarray:
 def make_trajectory(rng: np.random.Generator, frames: int) -> Trajectory:
     """A drive of ``frames`` frames starting at the world origin, heading drawn at random."""
     target_speed = _piecewise(rng, frames, lambda: rng.uniform(0.5, 1.5))
-    if frames >= 40:  # one stop: braking (≤ 15 frames), ≥ 5 exactly static frames, pulling away
-        start = int(rng.integers(5, frames - 30))
-        target_speed[start : start + int(rng.integers(20, 26))] = 0.0
     speed = _follow(target_speed, target_speed[0], MAX_ACCEL)
+    if frames >= 40:  # one stop: braking, 3–6 exactly static frames, pulling away
+        start = int(rng.integers(5, frames - 30))
+        braking = int(np.ceil(speed[start] / MAX_ACCEL))
+        target_speed[start : start + braking + int(rng.integers(3, 7))] = 0.0
+        speed = _follow(target_speed, target_speed[0], MAX_ACCEL)
     curvature = _piecewise(rng, frames, lambda: rng.choice([0.0, rng.uniform(-MAX_CURVATURE, MAX_CURVATURE)]))
     curvature = _follow(curvature, 0.0, 0.004)
     step = np.concatenate([[0.0], speed[:-1]])  # distance covered arriving at each frame

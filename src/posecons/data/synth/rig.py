@@ -13,6 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
+
 KITTI_SIZE = (1242, 375)
 CAM_TO_CAM = {
     "corner_dist": [9.950000e-02],
@@ -124,10 +125,3 @@ class Rig:
             entries[f"P_rect_0{cam}"] = self.p_rect(cam).ravel().tolist()
         order = ["corner_dist"] + [f"{k}_0{c}" for c in range(4) for k in ("S", "K", "D", "R", "T", "S_rect", "R_rect", "P_rect")]
         return {key: entries[key] for key in order}
-
-
-def format_calib(entries: dict, calib_time: str | None = "01-Jan-2020 00:00:00") -> str:
-    """KITTI calibration text: optional ``calib_time`` then ``key: v v v`` lines (%e numbers)."""
-    lines = [f"calib_time: {calib_time}"] if calib_time else []
-    lines += [f"{key}: " + " ".join(f"{float(v):e}" for v in values) for key, values in entries.items()]
-    return "\n".join(lines) + "\n"
