@@ -48,7 +48,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     d = subparsers.add_parser("demo", help="synthetic data → train on the CPU → evaluate → report with plots")
     d.add_argument("--out", default="runs/demo")
-    d.add_argument("--minutes", type=float, default=8.0, help="training time budget")
     d.add_argument("--seed", type=int, default=0)
     d.set_defaults(func=demo_command)
 
@@ -96,7 +95,7 @@ def train_command(args: argparse.Namespace) -> int:
 def demo_command(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
-    summary = run_demo(Path(args.out), minutes=args.minutes, seed=args.seed)
+    summary = run_demo(Path(args.out), seed=args.seed)
     print(f"report: {Path(args.out) / 'report.md'}  abs_rel {summary['abs_rel']:.3f} "
           f"(untrained {summary['abs_rel_untrained']:.3f}), σ/μ {summary['scale_cv']:.3f}")
     return 0
