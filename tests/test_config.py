@@ -29,7 +29,7 @@ def test_preset_with_base_and_overrides(tmp_path):
 def test_bad_values_are_rejected(override, message):
     if message is None:
         assert load_config(overrides=[override]).model.frame_ids == [0, 1]
-        with pytest.raises(PoseconsError, match="need model.frame_ids"):
+        with pytest.raises(PoseconsError, match="needs model.frame_ids to hold a past and a future"):
             load_config(overrides=[override, "loss.constraints=[cyc]"])
         return
     with pytest.raises(PoseconsError, match=message):

@@ -76,21 +76,23 @@ class TruePoses(nn.Module):
         return torch.zeros(len(self.pairs) * n, 1, 3), t.repeat_interleave(n, 0)
 
 
-def sliding_scene(shift_px: int, b: int = 2):
+def sliding_scene(shift_px: int, frame_ids, b: int = 2):
     """Fronto-parallel textured plane; frame f sees the texture shifted by f·shift_px pixels."""
     tex = torch.nn.functional.avg_pool2d(torch.rand(b, 3, H, W + 8 * shift_px), 3, 1, 1)
-    frames = [tex[..., 4 * shift_px + f * shift_px: 4 * shift_px + f * shift_px + W] for f in (0, -1, 1)]
+    frames = [tex[..., 4 * shift_px + f * shift_px: 4 * shift_px + f * shift_px + W] for f in frame_ids]
     return torch.stack(frames, 1)
 
 
-def test_pose_conventions_with_true_motion():
+@pytest.mark.parametrize("n", [1, 2])
+def test_pose_conventions_with_true_motion(n):
     z, fx_norm = 10.0, 0.5
     v = 2 * z / (fx_norm * W)  # 2-pixel shift per frame: fx·v/Z = 2
-    frames = sliding_scene(2)
+    frame_ids = [0, -n, n]
+    frames = sliding_scene(2, frame_ids)
     K = torch.tensor([[fx_norm, 0, 0.5], [0, fx_norm * W / H, 0.5], [0, 0, 1]]).expand(2, 3, 3).clone()
     results = {}
     for sign in (1.0, -1.0):
-        model = PoseConsModel(make_config(ALL, **{"loss.automask": "false"}))
+        model = PoseConsModel(make_config(ALL, **{"loss.automask": "false", "model.frame_ids": f"[0,-{n},{n}]"}))
         min_d, max_d = 1 / 100.0, 1 / 0.1
         model.depth_net = ConstantDepth((1 / z - min_d) / (max_d - min_d))
         model.pose_net = TruePoses(model, v, sign)

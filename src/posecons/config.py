@@ -104,8 +104,9 @@ class Config:
         bad = [c for c in lo.constraints if c not in CONSTRAINTS]
         if bad:
             raise PoseconsError(f"loss.constraints: unknown {bad}; choose from {list(CONSTRAINTS)}")
-        if ("fb" in lo.constraints or "cyc" in lo.constraints) and not {-1, 1} <= set(m.frame_ids):
-            raise PoseconsError("the fb and cyc constraints need model.frame_ids to contain -1 and 1")
+        if "cyc" in lo.constraints and not (min(m.frame_ids) < 0 < max(m.frame_ids)):
+            raise PoseconsError("the cyc constraint needs model.frame_ids to hold a past and a future frame, "
+                                f"e.g. [0, -1, 1]; got {m.frame_ids}")
         if lo.translation_norm not in ("sum", "mean"):
             raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
         if self.train.precision not in ("32", "bf16", "16"):

@@ -56,7 +56,7 @@ class PoseConsModel(nn.Module):
         """(role, a, b) frame-id pairs the pose net must see this step; a pair gives T_{b←a}.
 
         Sources are fed in temporal order (SPEC §1); fb adds each reversed pair, id (0, 0),
-        cyc (−1, +1).
+        cyc (−n, +n).
         """
         sources = self.config.model.frame_ids[1:]
         pairs = [("pose", min(f, 0), max(f, 0)) for f in sources]
@@ -65,8 +65,13 @@ class PoseConsModel(nn.Module):
         if "id" in constraints:
             pairs.append(("id", 0, 0))
         if "cyc" in constraints:
-            pairs.append(("cyc", -1, 1))
+            pairs.append(("cyc", *self.cycle_ids()))
         return pairs
+
+    def cycle_ids(self) -> tuple[int, int]:
+        """(−n, +n): the nearest source on each side of the target (n = 1 for frames 0, −1, +1)."""
+        sources = self.config.model.frame_ids[1:]
+        return max(f for f in sources if f < 0), min(f for f in sources if f > 0)
 
     def forward(self, batch: dict, step: int = 0) -> tuple[dict, dict[str, torch.Tensor]]:
         m, lo = self.config.model, self.config.loss
@@ -105,8 +110,9 @@ class PoseConsModel(nn.Module):
                                                          lo.translation_norm)
                 elif name == "id":
                     losses["id"] = identity_loss(*raw[("id", 0, 0)])
-                else:  # T_{+1←−1} against T_{+1←0} · T_{0←−1}
-                    losses["cyc"] = cycle_loss(mat("cyc", -1, 1), mat("pose", -1, 0), mat("pose", 0, 1),
+                else:  # T_{+n←−n} against T_{+n←0} · T_{0←−n}
+                    prev, nxt = self.cycle_ids()
+                    losses["cyc"] = cycle_loss(mat("cyc", prev, nxt), mat("pose", prev, 0), mat("pose", 0, nxt),
                                                lo.translation_norm)
                 losses["total"] = losses["total"] + weights[name] * losses[name]
 
