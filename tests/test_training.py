@@ -55,6 +55,15 @@ def test_few_steps_every_variant(synth_data, tmp_path, constraints):
     assert state["step"] == 2 and state["config"]["loss"]["constraints"] == [c for c in constraints.split(",") if c]
 
 
+def test_gradient_accumulation_counts_optimiser_steps(synth_data, tmp_path):
+    cfg = tiny_config("train.grad_accum=2", "train.max_steps=2", "train.val_every=0", "train.epochs=1")
+    trainer = Trainer(cfg, synth_data, tmp_path / "run", quiet=True)
+    before = {k: v.clone() for k, v in trainer.model.state_dict().items()}
+    assert trainer.fit()["steps"] == 2
+    assert trainer.optimizer.state_dict()["state"][0]["step"] == 2  # two updates from four micro-batches
+    assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())
+
+
 def final_weights(run: Path) -> dict:
     return load_checkpoint(run / "checkpoints" / "last.pt")["model"]
 

@@ -193,7 +193,7 @@ class Trainer:
         while self.step < total and self.epoch < t.epochs:
             micro = 0
             for batch in self._loader(self.epoch, self.batch_in_epoch * t.grad_accum):
-                losses = self._micro_step(batch, last=(micro + 1) % t.grad_accum == 0)
+                losses, outputs = self._micro_step(batch, last=(micro + 1) % t.grad_accum == 0)
                 micro += 1
                 if micro % t.grad_accum:
                     continue
@@ -202,7 +202,7 @@ class Trainer:
                 bar.update(1)
                 if losses is not None:
                     bar.set_postfix({k: f"{v:.3g}" for k, v in losses.items()}, refresh=False)
-                    self._log(losses, batch)
+                    self._log(losses, batch, outputs)
                 if t.val_every and self.step % t.val_every == 0:
                     last_metrics = self.validate()
                 if t.checkpoint_every and self.step % t.checkpoint_every == 0:
@@ -226,28 +226,33 @@ class Trainer:
             self.writer.close()
         return summary
 
-    def _micro_step(self, batch: dict, last: bool) -> dict[str, float] | None:
-        """Forward/backward of one micro-batch; the optimiser steps on the last of ``grad_accum``."""
+    def _micro_step(self, batch: dict, last: bool) -> tuple[dict[str, float] | None, dict]:
+        """Forward/backward of one micro-batch; the optimiser steps on the last of ``grad_accum``.
+
+        Returns the loss values (None until the optimiser stepped, or when the step was skipped)
+        and the model outputs, which the image log reuses.
+        """
         t = self.config.train
         batch = {k: v.to(self.device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
         sync = last or self.env.world == 1
         context = self.ddp.no_sync() if not sync and hasattr(self.ddp, "no_sync") else contextlib.nullcontext()
         with context:
             with self._autocast():
-                _, losses = self.ddp(batch, step=self.step)
+                outputs, losses = self.ddp(batch, step=self.step)
             finite = torch.isfinite(losses["total"]).float()
             if self.env.world > 1:  # every rank must agree to skip, or DDP would hang
                 dist.all_reduce(finite, op=dist.ReduceOp.MIN)
             if finite.item() == 0:
-                return self._skip_step()
+                self._skip_step()
+                return None, outputs
             self.scaler.scale(losses["total"] / t.grad_accum).backward()
         if not last:
-            return None
+            return None, outputs
         self.scaler.step(self.optimizer)
         self.scaler.update()
         self.optimizer.zero_grad(set_to_none=True)
         self.bad_steps = 0
-        return {k: float(v.detach()) for k, v in losses.items()}
+        return {k: float(v.detach()) for k, v in losses.items()}, outputs
 
     def _skip_step(self) -> None:
         self.optimizer.zero_grad(set_to_none=True)
@@ -258,9 +263,8 @@ class Trainer:
             raise PoseconsError(f"the loss was not finite for {self.bad_steps} steps in a row (step {self.step}); "
                                 f"the last good state is in {self.out / 'checkpoints' / 'last.pt'}. "
                                 "Try a lower train.lr or train.precision=32")
-        return None
 
-    def _log(self, losses: dict[str, float], batch: dict) -> None:
+    def _log(self, losses: dict[str, float], batch: dict, outputs: dict) -> None:
         t = self.config.train
         if not self.writer:
             return
@@ -269,12 +273,8 @@ class Trainer:
                 self.writer.add_scalar(f"loss/{k}", v, self.step)
             self.writer.add_scalar("lr", self.optimizer.param_groups[0]["lr"], self.step)
         if t.image_every and self.step % t.image_every == 0:
-            self.model.eval()
-            with torch.no_grad():
-                outputs, _ = self.model(batch, step=self.step)
-            self.model.train()
             self.writer.add_image("input", batch["frames"][0, 0], self.step)
-            disp = outputs["disp"][0][0]
+            disp = outputs["disp"][0][0].detach().float()
             self.writer.add_image("disparity", disp / disp.max(), self.step)
             self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
 
