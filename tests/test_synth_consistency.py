@@ -23,8 +23,14 @@ W, H, FRAMES, SEED = 192, 64, 8, 5
 def data(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("consistency") / "data"
     assert main(["synth", "--out", str(out), "--drives", "2", "--frames", str(FRAMES), "--seed", str(SEED),
-                 "--width", str(W), "--height", str(H)]) == 0
+                 "--width", str(W), "--height", str(H), "--neighbours", "2"]) == 0
     return out
+
+
+def test_training_lines_have_the_requested_neighbours(data):
+    dataset = KittiRawDataset(data, data / "splits" / "synth" / "train_files.txt", H, W, frame_ids=(0, -2, 2))
+    assert len(dataset) > 0 and all(2 <= line.frame <= FRAMES - 3 for line in dataset.lines)
+    assert dataset[0]["frames"].shape == (3, 3, H, W)
 
 
 @pytest.mark.parametrize("frame", [2, 5])

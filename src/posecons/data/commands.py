@@ -25,6 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--width", type=int, default=1242)
     p.add_argument("--height", type=int, default=375)
     p.add_argument("--workers", type=int, default=None, help="render processes (default: up to 2)")
+    p.add_argument("--neighbours", type=int, default=1,
+                   help="training lines need frames ±N (for model.frame_ids [0, -N, N]; default 1)")
     p.set_defaults(func=_synth)
 
     p = subparsers.add_parser("export-gt", help="export ground-truth depth of a split to .npz (SPEC §8)")
@@ -62,7 +64,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _synth(args: argparse.Namespace) -> int:
-    info = generate_synth(args.out, args.drives, args.frames, args.seed, args.ext, args.width, args.height, args.workers)
+    info = generate_synth(args.out, args.drives, args.frames, args.seed, args.ext, args.width, args.height, args.workers,
+                          args.neighbours)
     print(f"wrote {len(info['drives'])} drives × {args.frames} frames to {args.out} (test: {', '.join(info['test_drives'])})")
     return 0
 

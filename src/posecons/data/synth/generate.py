@@ -146,11 +146,11 @@ def _write_drive_metadata(drive: Drive, rig: Rig, drive_dir: Path, sequence: str
     write_poses(odometry / "poses" / f"{sequence}.txt", np.linalg.inv(cam0[0]) @ cam0)
 
 
-def moving_frames(drive: Drive, rig: Rig) -> list[int]:
-    """Frames 1 … N−2 whose neighbours −1/+1 are at least STATIC_SPAN apart (non-static)."""
+def moving_frames(drive: Drive, rig: Rig, neighbours: int = 1) -> list[int]:
+    """Frames n … N−1−n whose neighbours −n/+n exist and are at least STATIC_SPAN apart (non-static)."""
     centres = np.stack([drive.camera_pose(rig, i, 2)[:3, 3] for i in range(len(drive.trajectory.speed))])
-    span = np.linalg.norm(centres[2:] - centres[:-2], axis=1)
-    return [i + 1 for i in np.nonzero(span >= STATIC_SPAN)[0]]
+    span = np.linalg.norm(centres[2 * neighbours:] - centres[:-2 * neighbours], axis=1)
+    return [i + neighbours for i in np.nonzero(span >= STATIC_SPAN)[0]]
 
 
 def generate_synth(
@@ -162,10 +162,16 @@ def generate_synth(
     width: int = KITTI_SIZE[0],
     height: int = KITTI_SIZE[1],
     workers: int | None = None,
+    neighbours: int = 1,
 ) -> dict:
-    """Write the dataset (all or nothing) and return its description (also in ``synth.json``)."""
-    if drives < 2 or frames < 3:
-        raise PoseconsError(f"synth needs at least 2 drives (one held out for testing) and 3 frames, got {drives} × {frames}")
+    """Write the dataset (all or nothing) and return its description (also in ``synth.json``).
+
+    Training lines are the moving frames whose neighbours ±``neighbours`` exist, for training
+    with ``model.frame_ids: [0, -n, n]``.
+    """
+    if drives < 2 or frames < 2 * neighbours + 1 or neighbours < 1:
+        raise PoseconsError(f"synth needs at least 2 drives (one held out for testing) and {2 * neighbours + 1} "
+                            f"frames for ±{neighbours} neighbours, got {drives} × {frames}")
     if ext not in ("png", "jpg") or width < 16 or height < 16:
         raise PoseconsError(f"synth: unsupported --ext {ext!r} or size {width}x{height}")
     workers = workers or min(2, os.cpu_count() or 1)
@@ -198,7 +204,7 @@ def generate_synth(
                 odom = [SplitLine(str(index), f, "l") for f in range(frames - 1)]
                 write_split(tmp / "splits" / "synth_odom" / f"test_files_{sequence}.txt", odom)
             else:
-                train_lines += [SplitLine(folder, f, "lr"[rng.integers(2)]) for f in moving_frames(drive, rig)]
+                train_lines += [SplitLine(folder, f, "lr"[rng.integers(2)]) for f in moving_frames(drive, rig, neighbours)]
         rng.shuffle(train_lines)
         n_val = max(1, len(train_lines) // 10) if len(train_lines) > 1 else 0
         write_split(tmp / "splits" / "synth" / "train_files.txt", train_lines[n_val:])
@@ -220,6 +226,7 @@ def generate_synth(
             "odometry_sequences": {drive_folder(i): f"{i:02d}" for i in range(drives)},
             "test_sequences": [f"{i:02d}" for i in test_ids],
             "splits": {"depth": "splits/synth", "odometry": "splits/synth_odom"},
+            "neighbours": neighbours,
             "intrinsics_px": {"fx": k[0, 0], "fy": k[1, 1], "cx": k[0, 2], "cy": k[1, 2]},
             "stereo_baseline_m": float(np.linalg.norm(rig.m_cam_rect0(2)[:3, 3] - rig.m_cam_rect0(3)[:3, 3])),
             "lidar_azimuth_step_deg": lidar.azimuth_step_deg,
