@@ -26,7 +26,7 @@ from .commands import resolve_preset  # noqa: E402
 from .trainer import train  # noqa: E402
 
 # The demo's synthetic data set: small frames keep decoding cheap on a 2-core CPU.
-SYNTH_ARGS = ["--drives", "6", "--frames", "120", "--width", "384", "--height", "128"]
+SYNTH_ARGS = ["--drives", "6", "--frames", "120", "--width", "384", "--height", "128", "--neighbours", "3"]
 
 
 def _run(*argv: str) -> None:
