@@ -47,10 +47,12 @@ def _plot_validation(metrics_file: Path, path: Path) -> Path | None:
     ax.plot(steps, [r["val_photometric"] for r in rows], "o-", label="val photometric loss")
     ax.set_xlabel("step")
     ax.set_ylabel("photometric loss")
+    handles = list(ax.get_lines())
     if "abs_rel" in rows[0]:
         ax2 = ax.twinx()
-        ax2.plot(steps, [r["abs_rel"] for r in rows], "s-", color="tab:red", label="val abs rel")
+        handles += ax2.plot(steps, [r["abs_rel"] for r in rows], "s-", color="tab:red", label="val abs rel")
         ax2.set_ylabel("abs rel (median-scaled)", color="tab:red")
+    ax.legend(handles=handles, loc="upper right")
     ax.set_title("validation during training")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -58,19 +60,20 @@ def _plot_validation(metrics_file: Path, path: Path) -> Path | None:
     return path
 
 
-def run_demo(out: Path, seed: int = 0) -> dict:
+def run_demo(out: Path, seed: int = 0, synth_args: list[str] = SYNTH_ARGS, overrides: list[str] = ()) -> dict:
+    """Run the whole demo into ``out``; ``synth_args``/``overrides`` shrink it for tests."""
     start = time.time()
     out.mkdir(parents=True, exist_ok=True)
     data, run, ev, plots = out / "data", out / "run", out / "eval", out / "plots"
     meta_file = data / "synth.json"
     if not meta_file.is_file():
         print("[1/5] generating the synthetic KITTI-format data set", flush=True)
-        _run("synth", "--out", data, "--seed", seed, *SYNTH_ARGS)
+        _run("synth", "--out", data, "--seed", seed, *synth_args)
     meta = json.loads(meta_file.read_text())
     test_split = data / "splits" / "synth" / "test_files.txt"
     odom_seq = f"{int(meta['test_sequences'][0]):02d}"
 
-    config = load_config(resolve_preset("synth/demo"), [f"train.seed={seed}"])
+    config = load_config(resolve_preset("synth/demo"), [f"train.seed={seed}", *overrides])
     torch.manual_seed(seed)
     untrained = out / "untrained.pt"
     save_checkpoint(untrained, {"config": config.to_dict(), "model": PoseConsModel(config).state_dict()})
