@@ -25,11 +25,8 @@ W, H, FRAMES, SEED = 312, 96, 12, 3
 
 
 @pytest.fixture(scope="module")
-def synth(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("synth") / "data"
-    assert main(["synth", "--out", str(out), "--drives", "2", "--frames", str(FRAMES), "--seed", str(SEED),
-                 "--width", str(W), "--height", str(H), "--workers", "1"]) == 0
-    return out
+def synth(make_synth) -> Path:
+    return make_synth(2, FRAMES, W, H, SEED, "--workers", "1")
 
 
 def test_layout_and_description(synth: Path) -> None:

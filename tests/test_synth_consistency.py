@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import torch
 
-from posecons.cli import main
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.synth import drive_folder, make_drive
 from posecons.data.synth.render import camera_depth_at
@@ -20,11 +19,8 @@ W, H, FRAMES, SEED = 192, 64, 8, 5
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("consistency") / "data"
-    assert main(["synth", "--out", str(out), "--drives", "2", "--frames", str(FRAMES), "--seed", str(SEED),
-                 "--width", str(W), "--height", str(H), "--neighbours", "2"]) == 0
-    return out
+def data(make_synth) -> Path:
+    return make_synth(2, FRAMES, W, H, SEED, "--neighbours", "2")
 
 
 def test_training_lines_have_the_requested_neighbours(data):

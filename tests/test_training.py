@@ -25,11 +25,8 @@ TINY = ["data.split=synth", "model.height=64", "model.width=192", "model.num_lay
 
 
 @pytest.fixture(scope="module")
-def synth_data(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("synth") / "data"
-    assert cli(["synth", "--out", str(out), "--drives", "2", "--frames", "16", "--width", "192",
-                "--height", "64", "--seed", "3"]) == 0
-    return out
+def synth_data(make_synth) -> Path:
+    return make_synth(2, 16, 192, 64, 3)
 
 
 def tiny_config(*extra: str):
