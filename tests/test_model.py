@@ -103,3 +103,13 @@ def test_pose_conventions_with_true_motion(n):
     assert good["cyc"].item() == pytest.approx(0, abs=1e-6)
     assert good["id"].item() == pytest.approx(0, abs=1e-7)
     assert good["photometric"] < 0.3 * flipped["photometric"]  # the right direction explains the motion
+
+
+def test_mixed_precision_keeps_geometry_and_losses_in_fp32():
+    model = PoseConsModel(make_config(ALL))
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        outputs, losses = model(random_batch())
+    assert outputs["disp"][0].dtype == torch.bfloat16  # the networks ran in bf16 ...
+    assert all(T.dtype == torch.float32 for T in outputs["poses"].values())  # ... poses, warping
+    assert all(v.dtype == torch.float32 and torch.isfinite(v) for v in losses.values())  # and losses in fp32
+    losses["total"].backward()
