@@ -1,0 +1,77 @@
+"""Median wall time of one full training step (forward, all losses, backward, Adam) for the
+baseline, each pose constraint alone, and all three together.
+
+    python benchmarks/train_step.py --height 192 --width 640 --batch 12 --device cuda
+    python benchmarks/train_step.py --height 96 --width 320 --batch 4 --layers 18   # CPU-sized
+
+Prints a Markdown table; the overhead column is relative to the baseline.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import torch
+
+from posecons.config import load_config
+from posecons.model import PoseConsModel
+
+VARIANTS = {"baseline": [], "fb": ["fb"], "id": ["id"], "cyc": ["cyc"], "all": ["fb", "id", "cyc"]}
+
+
+def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
+    cfg = load_config(overrides=[f"model.height={args.height}", f"model.width={args.width}",
+                                 f"model.num_layers={args.layers}", "model.pretrained=false",
+                                 f"loss.constraints=[{','.join(constraints)}]"])
+    torch.manual_seed(0)
+    device = torch.device(args.device)
+    model = PoseConsModel(cfg).to(device).train()
+    optim = torch.optim.Adam(model.parameters(), lr=1e-4)
+    batch = {"frames": torch.rand(args.batch, 3, 3, args.height, args.width, device=device),
+             "intrinsics": torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], device=device)
+             .expand(args.batch, 3, 3).contiguous(),
+             "color_aug": torch.tensor([1.1, 0.9, 1.05, 0.02], device=device).expand(args.batch, 4).contiguous()}
+    times = []
+    for i in range(args.warmup + args.steps):
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        optim.zero_grad(set_to_none=True)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16):
+            _, losses = model(batch, step=i)
+        losses["total"].backward()
+        optim.step()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        if i >= args.warmup:
+            times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--height", type=int, default=192)
+    p.add_argument("--width", type=int, default=640)
+    p.add_argument("--batch", type=int, default=12)
+    p.add_argument("--layers", type=int, default=18)
+    p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    p.add_argument("--steps", type=int, default=10)
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--bf16", action="store_true", help="autocast the networks to bfloat16")
+    p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    args = p.parse_args()
+    print(f"ResNet-{args.layers}, {args.height}×{args.width}, batch {args.batch}, {args.device}, "
+          f"torch {torch.__version__}, {torch.get_num_threads()} threads, median of {args.steps} steps")
+    print("| variant | step (s) | overhead vs baseline |\n|---|---|---|")
+    base = None
+    for name in args.variants:
+        t = time_steps(VARIANTS[name], args)
+        base = t if name == "baseline" else base
+        overhead = f"{100 * (t / base - 1):+.1f} %" if base and name != "baseline" else "—"
+        print(f"| {name} | {t:.3f} | {overhead} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
