@@ -44,6 +44,7 @@ def test_few_steps_every_variant(synth_data, tmp_path, constraints):
     run = tmp_path / "run"
     assert summary["steps"] == 2 and summary["skipped_steps"] == 0
     assert (run / "config.yaml").is_file() and (run / "checkpoints" / "last.pt").is_file()
+    assert load_checkpoint(run / "checkpoints" / "best.pt")["best"] == metrics_at_best(run)
     assert any((run / "tb").iterdir())
     metrics = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert metrics[-1]["step"] == 2 and 0 < metrics[-1]["val_photometric"] < 1
@@ -59,6 +60,10 @@ def test_gradient_accumulation_counts_optimiser_steps(synth_data, tmp_path):
     assert trainer.fit()["steps"] == 2
     assert trainer.optimizer.state_dict()["state"][0]["step"] == 2  # two updates from four micro-batches
     assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())
+
+
+def metrics_at_best(run: Path) -> float:
+    return min(json.loads(line)["abs_rel"] for line in (run / "metrics.jsonl").read_text().splitlines())
 
 
 def final_weights(run: Path) -> dict:

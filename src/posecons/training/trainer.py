@@ -7,6 +7,7 @@ that torchrun sets. The run directory holds everything of a run::
     RUN/config.yaml             resolved config
     RUN/checkpoints/last.pt     model, optimiser, scheduler, step, epoch, data position, RNG
     RUN/checkpoints/epoch_NN.pt
+    RUN/checkpoints/best.pt     at the best validation abs rel (photometric loss without GT)
     RUN/tb/                     TensorBoard scalars and images
     RUN/metrics/step_NNNNNN.json and RUN/metrics.jsonl   one record per validation
 
@@ -111,6 +112,7 @@ class Trainer:
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=t.precision == "16")
         self.steps_per_epoch = len(self.train_set) // (t.batch_size * self.env.world * t.grad_accum)
         self.step = self.epoch = self.batch_in_epoch = self.bad_steps = self.skipped_steps = 0
+        self.best = math.inf  # best validation score so far (abs rel with ground truth, else photometric)
         if resume:
             self._load(self.out / "checkpoints" / "last.pt")
         elif self.env.main:
@@ -131,6 +133,7 @@ class Trainer:
             "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
             "scaler": self.scaler.state_dict(), "step": self.step, "epoch": self.epoch,
             "batch_in_epoch": self.batch_in_epoch, "bad_steps": self.bad_steps, "skipped_steps": self.skipped_steps,
+            "best": self.best,
             "rng": {"torch": torch.get_rng_state(), "python": random.getstate(),
                     "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else []},
         }
@@ -150,6 +153,7 @@ class Trainer:
         self.scaler.load_state_dict(state["scaler"])
         for key in ("step", "epoch", "batch_in_epoch", "bad_steps", "skipped_steps"):
             setattr(self, key, int(state[key]))
+        self.best = float(state["best"])
         if self.env.world == 1:  # per-rank RNG streams are only saved for rank 0
             torch.set_rng_state(state["rng"]["torch"].cpu())
             random.setstate(_as_tuple(state["rng"]["python"]))
@@ -279,14 +283,21 @@ class Trainer:
             self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
 
     def validate(self) -> dict[str, Any]:
+        """Validate on the main rank; keep ``checkpoints/best.pt`` at the best score so far."""
         if not self.validator or not self.env.main:
             return {}
         metrics = self.validator.run(self.model, self.step)
         self.model.train()
+        if not metrics:
+            return metrics
         if self.writer:
             for k, v in metrics.items():
                 if isinstance(v, (int, float)) and math.isfinite(v):
                     self.writer.add_scalar(f"val/{k}", v, self.step)
+        score = metrics.get("abs_rel", metrics["val_photometric"])
+        if score < self.best:
+            self.best = score
+            self.save("best.pt")
         return metrics
 
 
