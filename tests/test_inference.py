@@ -22,7 +22,8 @@ from posecons.geometry import backproject
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor
 from posecons.inference.camera import read_calib_intrinsics, resolve_intrinsics
-from posecons.inference.io import FrameSource, resize_rgb
+from posecons.data.io import resize_rgb
+from posecons.inference.io import FrameSource
 from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
 from posecons.inference.scale import camera_height
 from posecons.model import PoseConsModel

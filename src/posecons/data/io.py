@@ -86,3 +86,10 @@ def atomic_file(target: Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def resize_rgb(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(H, W, 3) uint8 → (3, height, width) float32 in [0, 1], resized like the training data
+    (PIL bilinear, antialiased when shrinking)."""
+    img = Image.fromarray(image).resize((width, height), Image.BILINEAR)
+    return np.asarray(img, dtype=np.float32).transpose(2, 0, 1) / 255.0

@@ -11,9 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
-from ..data.io import load_rgb
+from ..data.io import load_rgb, resize_rgb
 from ..data.kitti_raw import CAMERA
 from ..data.splits import SplitSource, read_split
 from ..errors import PoseconsError
@@ -36,8 +35,7 @@ def split_image_paths(data_path: str | Path, split: SplitSource) -> list[Path]:
 
 def load_image(path: Path, height: int, width: int) -> torch.Tensor:
     """RGB image resized bilinearly to (height, width) → (3, height, width) float in [0, 1]."""
-    img = load_rgb(path).resize((width, height), Image.BILINEAR)
-    return torch.from_numpy(np.asarray(img, dtype=np.float32) / 255.0).permute(2, 0, 1)
+    return torch.from_numpy(resize_rgb(np.asarray(load_rgb(path)), height, width))
 
 
 def _batches(paths: Sequence[Path], height: int, width: int, size: int) -> Iterator[torch.Tensor]:

@@ -121,13 +121,6 @@ class FrameSource:
             raise PoseconsError(f"{self.path}: the video has no decodable frames")
 
 
-def resize_rgb(image: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(H, W, 3) uint8 → (3, height, width) float32 in [0, 1], resized like the training data
-    (PIL bilinear, antialiased when shrinking)."""
-    img = Image.fromarray(image).resize((width, height), Image.BILINEAR)
-    return np.asarray(img, dtype=np.float32).transpose(2, 0, 1) / 255.0
-
-
 class SideBySideWriter:
     """H.264 MP4 of input | colour-mapped depth, frame by frame (odd sizes lose their last row/column,
     since yuv420p needs even dimensions)."""

@@ -37,7 +37,8 @@ from ..evaluation.trajectory_io import write_kitti_poses, write_tum
 from . import scale as scaling
 from .backend import Predictor
 from .camera import normalised_to_pixel, resolve_intrinsics
-from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, resize_rgb, staged_output
+from ..data.io import resize_rgb
+from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, staged_output
 from .plots import colorize, plot_scale_drift, plot_topview
 from .pointcloud import depth_to_points, write_ply
 
