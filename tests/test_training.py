@@ -133,13 +133,19 @@ def test_short_overfit_lowers_photometric_loss(synth_data, tmp_path):
     lines = (synth_data / "splits" / "synth" / "train_files.txt").read_text().splitlines()[:4]
     (split / "train_files.txt").write_text("\n".join(lines) + "\n")
     (split / "val_files.txt").write_text("\n".join(lines) + "\n")
-    cfg = tiny_config("train.lr=1e-3", "train.max_steps=60", "train.val_every=60", "data.flip_prob=0",
-                      "data.jitter_prob=0", "train.val_samples=4")
+    cfg = tiny_config("train.lr=1e-3", "train.epochs=20", "train.val_every=40", "data.flip_prob=0",
+                      "data.jitter_prob=0", "train.val_samples=4", "train.keep_epochs=2")
     trainer = Trainer(cfg, synth_data, tmp_path / "run", split_dir=split, quiet=True)
     before = trainer.validator.run(trainer.model, 0)["val_photometric"]
     trainer.fit()
     after = json.loads((tmp_path / "run" / "metrics.jsonl").read_text().splitlines()[-1])["val_photometric"]
     assert after < 0.85 * before, (before, after)
+    # 2 steps per epoch × 20 epochs, of which only the newest two snapshots stay, as weights only
+    checkpoints = tmp_path / "run" / "checkpoints"
+    assert sorted(p.name for p in checkpoints.glob("epoch_*.pt")) == ["epoch_19.pt", "epoch_20.pt"]
+    snapshot = load_checkpoint(checkpoints / "epoch_20.pt")
+    assert "optimizer" not in snapshot and snapshot["step"] == 40
+    assert all(torch.equal(v, trainer.model.state_dict()[k]) for k, v in snapshot["model"].items())
 
 
 def test_bad_input_is_reported_before_training(synth_data, tmp_path):

@@ -6,8 +6,8 @@ that torchrun sets. The run directory holds everything of a run::
 
     RUN/config.yaml             resolved config
     RUN/checkpoints/last.pt     model, optimiser, scheduler, step, epoch, data position, RNG
-    RUN/checkpoints/epoch_NN.pt
-    RUN/checkpoints/best.pt     at the best validation abs rel (photometric loss without GT)
+    RUN/checkpoints/epoch_NN.pt weights (+ config, step) at each epoch end; train.keep_epochs of them
+    RUN/checkpoints/best.pt     weights at the best validation abs rel (photometric loss without GT)
     RUN/tb/                     TensorBoard scalars and images
     RUN/metrics/step_NNNNNN.json and RUN/metrics.jsonl   one record per validation
 
@@ -160,9 +160,27 @@ class Trainer:
             if self.device.type == "cuda" and state["rng"]["cuda"]:
                 torch.cuda.set_rng_state_all([s.cpu() for s in state["rng"]["cuda"]])
 
-    def save(self, name: str = "last.pt") -> None:
+    def save(self) -> None:
+        """The full training state, for resuming: ``checkpoints/last.pt``."""
         if self.env.main:
-            save_checkpoint(self.out / "checkpoints" / name, self.state())
+            save_checkpoint(self.out / "checkpoints" / "last.pt", self.state())
+
+    def save_weights(self, name: str) -> None:
+        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict."""
+        if self.env.main:
+            save_checkpoint(self.out / "checkpoints" / name,
+                            {"config": self.config.to_dict(), "model": self.model.state_dict(),
+                             "step": self.step, "epoch": self.epoch, "best": self.best})
+
+    def _save_epoch(self) -> None:
+        keep = self.config.train.keep_epochs
+        if keep == 0 or not self.env.main:
+            return
+        self.save_weights(f"epoch_{self.epoch:02d}.pt")
+        if keep > 0:
+            snapshots = sorted((self.out / "checkpoints").glob("epoch_*.pt"), key=lambda p: int(p.stem[6:]))
+            for old in snapshots[:-keep]:
+                old.unlink()
 
     # ------------------------------------------------------------------ loop
     def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
@@ -219,7 +237,7 @@ class Trainer:
                 self.scheduler.step()
                 if not t.val_every:
                     last_metrics = self.validate()
-                self.save(f"epoch_{self.epoch:02d}.pt")
+                self._save_epoch()
             self.save()
         bar.close()
         if t.val_every and self.step % t.val_every:
@@ -297,7 +315,7 @@ class Trainer:
         score = metrics.get("abs_rel", metrics["val_photometric"])
         if score < self.best:
             self.best = score
-            self.save("best.pt")
+            self.save_weights("best.pt")
         return metrics
 
 
