@@ -24,6 +24,7 @@ def test_preset_with_base_and_overrides(tmp_path):
     ("train.batch_size=big", "train.batch_size: expected int"),
     ("model.height=100", "multiples of 32"),
     ("loss.constraints=[cycle]", "unknown \\['cycle'\\]"),
+    ("train.keep_epochs=-2", "train.keep_epochs must be -1"),
     ("model.frame_ids=[0,1]", None),  # valid without fb/cyc
 ])
 def test_bad_values_are_rejected(override, message):
