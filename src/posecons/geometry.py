@@ -85,13 +85,15 @@ def pose_vec_to_mat(axisangle: torch.Tensor, translation: torch.Tensor, invert: 
 def pose_distance(T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum") -> torch.Tensor:
     """The paper's eq. 2: d(T, P) = |1 − (tr(R_T R_Pᵀ) − 1)/2| + ‖t_T − t_P‖₁, shape (B,).
 
-    The rotation term is 1 − cos(angle between R_T and R_P), smooth at zero (no acos).
+    The rotation term is 1 − cos(angle between R_T and R_P), smooth at zero (no acos). It is
+    computed as ¼‖R_T − R_P‖²_F, which equals (3 − tr(R_T R_Pᵀ))/2 exactly for rotations and is
+    never negative (so no abs): the trace form cancels catastrophically in float32 near
+    agreement — where the constraints act — and there returns 0 or gradients of the wrong sign.
     ``translation_norm="mean"`` averages |Δt| over xyz instead of summing.
     """
     check_tensor("T", T, (None, 4, 4))
     check_tensor("P", P, (T.shape[0], 4, 4))
-    trace = (T[:, :3, :3] * P[:, :3, :3]).sum((-1, -2))  # tr(R_T R_Pᵀ) without a matmul
-    rot_term = (1 - (trace - 1) / 2).abs()
+    rot_term = 0.25 * (T[:, :3, :3] - P[:, :3, :3]).square().sum((-1, -2))
     dt = (T[:, :3, 3] - P[:, :3, 3]).abs()
     trans_term = dt.mean(-1) if translation_norm == "mean" else dt.sum(-1)
     return rot_term + trans_term
