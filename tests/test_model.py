@@ -5,6 +5,7 @@ import torch
 import torch.nn as nn
 
 from posecons.config import load_config
+from posecons.geometry import pose_vec_to_mat
 from posecons.model import PoseConsModel
 
 H, W = 64, 96
@@ -56,24 +57,43 @@ class ConstantDepth(nn.Module):
         return {s: torch.full((b, 1, h // 2 ** s, w // 2 ** s), self.value) for s in range(4)}
 
 
-class TruePoses(nn.Module):
-    """Returns T_{b←a} of a camera moving +v along x each frame, for the pairs the model asks for."""
+def log_rotation(R: torch.Tensor) -> torch.Tensor:
+    """(3, 3) float64 rotation (angle < π) → axis-angle (3,)."""
+    w = torch.stack([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    theta = torch.acos(((torch.trace(R) - 1) / 2).clamp(-1, 1))
+    return w / 2 if theta < 1e-9 else w * theta / (2 * torch.sin(theta))
 
-    def __init__(self, model, v, sign=1.0):
+
+class TrajectoryPoseNet(nn.Module):
+    """A pose net that recognises each input image as one of the known frames and returns the true
+    T_{b←a} = G_b⁻¹·G_a of the camera-to-world poses ``world[f]``: it depends on image content and
+    order, so feeding (b, a) for (a, b) anywhere gives the inverse motion."""
+
+    def __init__(self, frames: torch.Tensor, frame_ids, world: dict):
         super().__init__()
-        self.model, self.v, self.sign = model, v, sign
-        self.pairs = None
-        original = model.pose_pairs
+        self.keys = frames.reshape(-1, *frames.shape[-3:])  # (B·F, 3, H, W): frame ids repeat per sample
+        self.ids = list(frame_ids) * frames.shape[0]
+        self.world = world
 
-        def record(constraints):
-            self.pairs = original(constraints)
-            return self.pairs
-        model.pose_pairs = record
+    def frame_ids(self, images: torch.Tensor) -> list[int]:
+        diff = (images.float()[:, None] - self.keys[None]).abs().mean((2, 3, 4))
+        return [self.ids[i] for i in diff.argmin(1).tolist()]
 
-    def forward(self, a, b):
-        n = a.shape[0] // len(self.pairs)
-        t = torch.tensor([[[-self.sign * (pb - pa) * self.v, 0.0, 0.0]] for _, pa, pb in self.pairs])
-        return torch.zeros(len(self.pairs) * n, 1, 3), t.repeat_interleave(n, 0)
+    def forward(self, a, b, groups=1, tracked=None):
+        T = [torch.linalg.inv(self.world[fb]) @ self.world[fa] for fa, fb in zip(self.frame_ids(a), self.frame_ids(b))]
+        aa = torch.stack([log_rotation(m[:3, :3]) for m in T]).float().view(-1, 1, 3)
+        return aa, torch.stack([m[:3, 3] for m in T]).float().view(-1, 1, 3)
+
+
+def world_poses(frame_ids, rotation: float = 0.0, step=(1.0, 0.0, 0.0), seed: int = 0) -> dict:
+    """Camera-to-world poses: frame f at f·step, turned by random (non-commuting) rotations of
+    about ``rotation`` rad."""
+    g = torch.Generator().manual_seed(seed)
+    out = {}
+    for f in frame_ids:
+        e = torch.randn(1, 1, 3, generator=g, dtype=torch.float64) * rotation
+        out[f] = pose_vec_to_mat(e, f * torch.tensor(step, dtype=torch.float64).view(1, 1, 3))[0]
+    return out
 
 
 def sliding_scene(shift_px: int, frame_ids, b: int = 2):
@@ -91,11 +111,11 @@ def test_pose_conventions_with_true_motion(n):
     frames = sliding_scene(2, frame_ids)
     K = torch.tensor([[fx_norm, 0, 0.5], [0, fx_norm * W / H, 0.5], [0, 0, 1]]).expand(2, 3, 3).clone()
     results = {}
-    for sign in (1.0, -1.0):
+    for sign in (1.0, -1.0):  # the camera moves along +x (what the texture shift implies), or −x
         model = PoseConsModel(make_config(ALL, **{"loss.automask": "false", "model.frame_ids": f"[0,-{n},{n}]"}))
         min_d, max_d = 1 / 100.0, 1 / 0.1
         model.depth_net = ConstantDepth((1 / z - min_d) / (max_d - min_d))
-        model.pose_net = TruePoses(model, v, sign)
+        model.pose_net = TrajectoryPoseNet(frames, frame_ids, world_poses(frame_ids, step=(sign * v, 0, 0)))
         _, losses = model({"frames": frames, "intrinsics": K})
         results[sign] = losses
     good, flipped = results[1.0], results[-1.0]
@@ -113,3 +133,62 @@ def test_mixed_precision_keeps_geometry_and_losses_in_fp32():
     assert all(T.dtype == torch.float32 for T in outputs["poses"].values())  # ... poses, warping
     assert all(v.dtype == torch.float32 and torch.isfinite(v) for v in losses.values())  # and losses in fp32
     losses["total"].backward()
+
+
+@pytest.mark.parametrize("constraints", [["fb"], ["id"], ["cyc"], ALL])
+def test_constraint_pairs_do_not_change_the_warping_poses_or_running_statistics(constraints):
+    torch.manual_seed(3)
+    plain, constrained = PoseConsModel(make_config()), PoseConsModel(make_config(constraints))
+    constrained.load_state_dict(plain.state_dict())
+    batch = random_batch(b=3)
+    out_plain, _ = plain(batch)
+    out_constrained, _ = constrained(batch)
+    for f in (-1, 1):
+        assert torch.allclose(out_plain["poses"][f], out_constrained["poses"][f], atol=1e-6)
+    for (name, buf), other in zip(plain.pose_net.named_buffers(), constrained.pose_net.buffers()):
+        assert torch.allclose(buf.float(), other.float(), atol=1e-6), name
+
+
+def test_rotating_trajectory_gives_true_poses_and_zero_constraints():
+    # Rotations of 0.3 rad about random axes do not commute: composing the cycle in the wrong
+    # order, or inverting the wrong pair, leaves a non-zero loss or a wrong warping pose.
+    frame_ids = [0, -1, 1]
+    batch = random_batch(b=2)
+    world = world_poses(frame_ids, rotation=0.3, step=(0.5, -0.2, 1.0))
+    model = PoseConsModel(make_config(ALL))
+    model.pose_net = TrajectoryPoseNet(batch["frames"], frame_ids, world)
+    outputs, losses = model(batch)
+    for f in (-1, 1):
+        true = (torch.linalg.inv(world[f]) @ world[0]).float()  # T_{f←0}
+        assert torch.allclose(outputs["poses"][f], true.expand(2, 4, 4), atol=1e-5)
+    assert losses["fb"].item() == pytest.approx(0, abs=1e-5)
+    assert losses["cyc"].item() == pytest.approx(0, abs=1e-5)
+    assert losses["id"].item() == pytest.approx(0, abs=1e-6)
+    # The same recipe with the composition reversed is far from zero: the test can tell them apart.
+    from posecons.losses import cycle_loss
+    T = {f: outputs["poses"][f].double() for f in (-1, 1)}  # T_{f←0}
+    skip = (torch.linalg.inv(world[1]) @ world[-1]).expand(2, 4, 4)
+    first, second = torch.linalg.inv(T[-1]), T[1]  # T_{0←−1}, T_{+1←0}
+    assert cycle_loss(skip, first, second) < 1e-5 < 1e-2 < cycle_loss(skip, second, first)
+
+
+def test_predict_pose_and_pose_evaluation_share_the_training_pair_order(tmp_path):
+    from PIL import Image
+
+    from posecons.evaluation.predict import predict_steps
+
+    ids = list(range(5))
+    frames = torch.rand(1, len(ids), 3, H, W)
+    world = world_poses(ids, rotation=0.3, step=(0.3, 0.1, 1.0))
+    model = PoseConsModel(make_config()).eval()
+    model.pose_net = TrajectoryPoseNet(frames, ids, world)
+    true_steps = torch.stack([torch.linalg.inv(world[i + 1]) @ world[i] for i in ids[:-1]])  # T_{i+1←i}
+    pairs = model.predict_pose(frames[0, :-1], frames[0, 1:])
+    assert torch.allclose(pairs, true_steps.float(), atol=1e-5)
+    paths = []
+    for i in ids:
+        paths.append(tmp_path / f"{i:06d}.png")
+        Image.fromarray((frames[0, i].permute(1, 2, 0).numpy() * 255).round().astype("uint8")).save(paths[-1])
+    steps = predict_steps(model, paths, H, W, batch_size=2)
+    assert steps.shape == (4, 4, 4)
+    assert torch.allclose(torch.from_numpy(steps), true_steps, atol=1e-5)

@@ -62,3 +62,37 @@ def test_offline_pretrained_auto_warns_and_required_raises(monkeypatch):
     with pytest.raises(PoseconsError, match="model.pretrained=false"):
         ResnetEncoder(18, pretrained=True)
     assert networks.load_imagenet_state(18, False) is None
+
+
+def test_grouped_pose_batch_equals_separate_calls_and_tracks_only_the_first_groups():
+    torch.manual_seed(1)
+    batched, separate = PoseNet(10), PoseNet(10)
+    separate.load_state_dict(batched.state_dict())
+    a, b = torch.rand(3, 2, 3, 64, 96), torch.rand(3, 2, 3, 64, 96)  # 3 groups of 2 pairs
+    aa, t = batched(a.flatten(0, 1), b.flatten(0, 1), groups=3, tracked=2)
+    # Monodepth2 called the pose net once per source: the first two groups, one after the other.
+    singles = [separate(a[g], b[g]) for g in range(2)]
+    assert torch.allclose(aa[:4], torch.cat([s[0] for s in singles]), atol=1e-6)
+    assert torch.allclose(t[:4], torch.cat([s[1] for s in singles]), atol=1e-6)
+    for (name, buf), other in zip(batched.named_buffers(), separate.buffers()):
+        assert torch.allclose(buf.float(), other.float(), atol=1e-6), name
+    # The third group is normalised on its own: it matches a separate call too.
+    third = PoseNet(10)
+    third.load_state_dict(batched.state_dict())
+    assert torch.allclose(t[4:], third(a[2], b[2])[1], atol=1e-6)
+
+
+def test_pose_batch_must_split_into_equal_groups():
+    with pytest.raises(ValueError, match="5 pairs.*2 equal groups"):
+        PoseNet(10)(torch.rand(5, 3, 64, 96), torch.rand(5, 3, 64, 96), groups=2)
+
+
+def test_pose_decoder_scales_its_output_by_exactly_0_01():
+    dec = networks.PoseDecoder(512)
+    last = dec.net[-1]
+    torch.nn.init.zeros_(last.weight)
+    with torch.no_grad():
+        last.bias.copy_(torch.arange(1.0, 7.0))
+    aa, t = dec(torch.rand(2, 512, 2, 3))
+    assert torch.equal(aa, 0.01 * torch.tensor([1.0, 2, 3]).expand(2, 1, 3))
+    assert torch.equal(t, 0.01 * torch.tensor([4.0, 5, 6]).expand(2, 1, 3))

@@ -70,7 +70,7 @@ class TrainConfig:
     seed: int = 0
     deterministic: bool = False
     precision: str = "32"  # "32", "bf16" or "16" (mixed precision on GPU; geometry stays fp32)
-    sync_bn: bool = False
+    sync_bn: bool = False  # SyncBatchNorm in the depth net across processes (the pose net's stays per group)
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50
     image_every: int = 500

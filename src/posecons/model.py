@@ -85,12 +85,13 @@ class PoseConsModel(nn.Module):
 
         disps = self.depth_net(net_frames[:, 0])
 
-        # Every pose-net input of this step in one batched pass.
+        # Every pose-net input of this step in one batched pass, normalised per pair group; the
+        # temporal pairs (listed first) alone update the running statistics.
         constraints = self.active_constraints(step)
         pairs = self.pose_pairs(constraints)
         a = torch.cat([net_frames[:, index[p[1]]] for p in pairs])
         b = torch.cat([net_frames[:, index[p[2]]] for p in pairs])
-        aa_all, t_all = self.pose_net(a, b)
+        aa_all, t_all = self.pose_net(a, b, groups=len(pairs), tracked=len(m.frame_ids) - 1)
         with torch.autocast(frames.device.type, enabled=False):
             raw = {p: (aa, t) for p, aa, t in zip(pairs, aa_all.float().chunk(len(pairs)),
                                                   t_all.float().chunk(len(pairs)))}

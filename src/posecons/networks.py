@@ -18,7 +18,7 @@ from .geometry import check_tensor
 # num_layers → (torchvision constructor, ImageNet weights enum); 10 is a small demo encoder
 # (one basic block per stage) that has no published ImageNet weights.
 _RESNETS = {
-    10: (lambda: tvm.resnet.ResNet(tvm.resnet.BasicBlock, [1, 1, 1, 1]), None),
+    10: (lambda **kw: tvm.resnet.ResNet(tvm.resnet.BasicBlock, [1, 1, 1, 1], **kw), None),
     18: (tvm.resnet18, tvm.ResNet18_Weights.IMAGENET1K_V1),
     34: (tvm.resnet34, tvm.ResNet34_Weights.IMAGENET1K_V1),
     50: (tvm.resnet50, tvm.ResNet50_Weights.IMAGENET1K_V1),
@@ -48,19 +48,46 @@ def load_imagenet_state(num_layers: int, pretrained: bool | str) -> dict | None:
         return None
 
 
+class GroupedBatchNorm2d(nn.BatchNorm2d):
+    """BatchNorm2d that, in training, normalises each of ``groups`` equal chunks of the batch on
+    its own and lets only the first ``tracked`` chunks update the running statistics, one after
+    the other — what separate calls per chunk would do, in one pass of the surrounding network.
+
+    The pose net sees every pair of a step in one batch (temporal pairs first, then the
+    constraints' reversed, identity and skip pairs): grouping keeps the constraint pairs from
+    changing the warping poses, and tracking only the temporal pairs keeps them out of the
+    statistics used at evaluation. In eval mode it is a plain BatchNorm2d.
+    """
+
+    groups: int = 1
+    tracked: int = 1
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.training or self.groups == 1:
+            return super().forward(x)
+        out = []
+        for i, chunk in enumerate(x.chunk(self.groups)):
+            track = i < self.tracked
+            out.append(F.batch_norm(chunk, self.running_mean if track else None, self.running_var if track else None,
+                                    self.weight, self.bias, True, self.momentum, self.eps))
+        self.num_batches_tracked.add_(self.tracked)
+        return torch.cat(out)
+
+
 class ResnetEncoder(nn.Module):
     """ResNet features at 1/2, 1/4, 1/8, 1/16, 1/32 of the input.
 
     ``num_input_images=2`` widens conv1 to a 6-channel frame pair (the pose encoder); ImageNet
     conv1 weights are then tiled over both images and halved, so a pair of equal images
-    gives the pretrained response.
+    gives the pretrained response. ``norm_layer`` replaces BatchNorm2d (same state-dict keys).
     """
 
-    def __init__(self, num_layers: int = 18, pretrained: bool | str = False, num_input_images: int = 1):
+    def __init__(self, num_layers: int = 18, pretrained: bool | str = False, num_input_images: int = 1,
+                 norm_layer: type[nn.BatchNorm2d] = nn.BatchNorm2d):
         super().__init__()
         if num_layers not in _RESNETS:
             raise PoseconsError(f"num_layers must be one of {sorted(_RESNETS)}, got {num_layers}")
-        self.net = _RESNETS[num_layers][0]()
+        self.net = _RESNETS[num_layers][0](norm_layer=norm_layer)
         self.num_input_images = num_input_images
         state = load_imagenet_state(num_layers, pretrained)
         if num_input_images > 1:
@@ -161,8 +188,16 @@ class PoseNet(nn.Module):
 
     def __init__(self, num_layers: int = 18, pretrained: bool | str = False):
         super().__init__()
-        self.encoder = ResnetEncoder(num_layers, pretrained, num_input_images=2)
+        self.encoder = ResnetEncoder(num_layers, pretrained, num_input_images=2, norm_layer=GroupedBatchNorm2d)
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
-    def forward(self, image_a: torch.Tensor, image_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, image_a: torch.Tensor, image_b: torch.Tensor, groups: int = 1,
+                tracked: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """In training, ``groups`` equal chunks of the batch get their own BatchNorm statistics and
+        the first ``tracked`` (default all) update the running ones (see GroupedBatchNorm2d)."""
+        if image_a.shape[0] % groups:
+            raise ValueError(f"batch of {image_a.shape[0]} pairs does not split into {groups} equal groups")
+        for bn in self.encoder.modules():
+            if isinstance(bn, GroupedBatchNorm2d):
+                bn.groups, bn.tracked = groups, groups if tracked is None else tracked
         return self.decoder(self.encoder(torch.cat([image_a, image_b], 1))[-1])

@@ -102,8 +102,8 @@ class Trainer:
         self.validator = Validator(config, data_path, val_file, self.out, self.device) if val_file else None
 
         model = PoseConsModel(config).to(self.device)
-        if t.sync_bn and self.env.world > 1:
-            model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
+        if t.sync_bn and self.env.world > 1:  # the pose net keeps its per-pair-group statistics
+            model.depth_net = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model.depth_net)
         self.model = model
         self.ddp = (DistributedDataParallel(model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
                     if self.env.world > 1 else model)
