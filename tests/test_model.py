@@ -125,12 +125,19 @@ def test_pose_conventions_with_true_motion(n):
     assert good["photometric"] < 0.3 * flipped["photometric"]  # the right direction explains the motion
 
 
-def test_mixed_precision_keeps_geometry_and_losses_in_fp32():
+def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32():
     model = PoseConsModel(make_config(ALL))
+    inner = []
+    for net in (model.depth_net, model.pose_net):
+        net.encoder.net.layer4.register_forward_hook(lambda mod, inp, out: inner.append(out.dtype))
+    raw = []
+    model.pose_net.decoder.register_forward_hook(lambda mod, inp, out: raw.extend(o.dtype for o in out))
     with torch.autocast("cpu", dtype=torch.bfloat16):
         outputs, losses = model(random_batch())
-    assert outputs["disp"][0].dtype == torch.bfloat16  # the networks ran in bf16 ...
-    assert all(T.dtype == torch.float32 for T in outputs["poses"].values())  # ... poses, warping
+    assert inner == [torch.bfloat16] * 2  # the networks ran in bf16 ...
+    assert all(d.dtype == torch.float32 for d in outputs["disp"].values())  # ... their outputs are fp32,
+    assert raw == [torch.float32] * 2
+    assert all(T.dtype == torch.float32 for T in outputs["poses"].values())  # ... as are poses, warping
     assert all(v.dtype == torch.float32 and torch.isfinite(v) for v in losses.values())  # and losses in fp32
     losses["total"].backward()
 

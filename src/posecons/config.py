@@ -69,7 +69,7 @@ class TrainConfig:
     grad_accum: int = 1
     seed: int = 0
     deterministic: bool = False
-    precision: str = "32"  # "32", "bf16" or "16" (mixed precision on GPU; geometry stays fp32)
+    precision: str = "32"  # "32", "bf16" (GPU or CPU) or "16" (GPU): networks under autocast, their outputs fp32
     sync_bn: bool = False  # SyncBatchNorm in the depth net across processes (the pose net's stays per group)
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50

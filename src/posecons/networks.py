@@ -119,6 +119,13 @@ class ResnetEncoder(nn.Module):
         return feats
 
 
+def fp32_output(layer: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    """Run a network's output layer in float32 even under autocast, so that disparities and the
+    pose 6-vector leave the networks in full precision (the geometry after them is fp32)."""
+    with torch.autocast(x.device.type, enabled=False):
+        return layer(x.float())
+
+
 class Conv3x3(nn.Sequential):
     """Reflection-padded 3×3 convolution, optionally followed by ELU."""
 
@@ -150,7 +157,7 @@ class DepthDecoder(nn.Module):
                 x = torch.cat([x, feats[i - 1]], 1)
             x = self.up_out[i](x)
             if i in self.scales:
-                out[i] = torch.sigmoid(self.disp_convs[str(i)](x))
+                out[i] = torch.sigmoid(fp32_output(self.disp_convs[str(i)], x))
         return out
 
 
@@ -167,7 +174,7 @@ class PoseDecoder(nn.Module):
         )
 
     def forward(self, feature: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        out = 0.01 * self.net(feature).mean((2, 3)).view(-1, 1, 6)
+        out = 0.01 * fp32_output(self.net[-1], self.net[:-1](feature)).mean((2, 3)).view(-1, 1, 6)
         return out[..., :3], out[..., 3:]
 
 

@@ -42,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--nodes", type=int, default=1)
     p.add_argument("--rdzv-endpoint", help="HOST:PORT of the rendezvous for --nodes > 1")
     p.add_argument("--accelerator", choices=("auto", "cpu", "cuda"), default="auto")
-    p.add_argument("--precision", choices=("32", "bf16", "16"), help="mixed precision on GPU")
+    p.add_argument("--precision", choices=("32", "bf16", "16"), help="mixed precision: bf16 (GPU or CPU) or 16 (GPU)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=train_command)
 

@@ -90,6 +90,9 @@ class Trainer:
         if self.env.main:
             _prepare_run_dir(self.out, resume)
         self.quiet = quiet or not self.env.main
+        if t.precision == "16" and self.device.type != "cuda":
+            raise PoseconsError("train.precision=16 (float16 with a gradient scaler) needs a GPU; "
+                                "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32")
         if t.deterministic:
             torch.use_deterministic_algorithms(True)
         self._seed_everything(t.seed + self.env.rank)
@@ -197,9 +200,8 @@ class Trainer:
                           persistent_workers=False, generator=torch.Generator().manual_seed(t.seed + epoch))
 
     def _autocast(self):
-        precision = self.config.train.precision
-        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(precision)
-        return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None and self.device.type == "cuda")
+        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.config.train.precision)
+        return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None)
 
     def total_steps(self) -> int:
         t = self.config.train
