@@ -45,11 +45,13 @@ def fake_imagenet(monkeypatch):
 
 def test_pretrained_pose_conv1_is_tiled_and_halved(monkeypatch):
     state = fake_imagenet(monkeypatch)
-    pose = ResnetEncoder(18, pretrained=True, num_input_images=2)
+    imagenet = networks.load_imagenet_state(18, True)
+    pose = ResnetEncoder(18, imagenet, num_input_images=2)
     w = pose.net.conv1.weight.detach()
     assert w.shape == (64, 6, 7, 7)
     assert torch.allclose(w[:, :3], state["conv1.weight"] / 2) and torch.allclose(w[:, 3:], state["conv1.weight"] / 2)
-    depth = ResnetEncoder(18, pretrained=True)
+    depth = ResnetEncoder(18, imagenet)
+    assert torch.equal(imagenet["conv1.weight"], state["conv1.weight"])  # the shared dict is not altered
     assert torch.equal(depth.net.layer4[1].conv2.weight, state["layer4.1.conv2.weight"])
 
 
@@ -59,8 +61,8 @@ def test_offline_pretrained_auto_warns_and_required_raises(monkeypatch):
     monkeypatch.setattr(tvm.ResNet18_Weights.IMAGENET1K_V1, "get_state_dict", offline)
     with pytest.warns(UserWarning, match="Training from scratch"):
         assert networks.load_imagenet_state(18, "auto") is None
-    with pytest.raises(PoseconsError, match="model.pretrained=false"):
-        ResnetEncoder(18, pretrained=True)
+    with pytest.raises(PoseconsError, match="from scratch on purpose with --set model.pretrained=false"):
+        networks.load_imagenet_state(18, True)
     assert networks.load_imagenet_state(18, False) is None
 
 

@@ -15,6 +15,7 @@ import torch
 from posecons.checkpoint import load_checkpoint
 from posecons.cli import main as cli
 from posecons.config import load_config
+from posecons.training.commands import resolve_preset
 from posecons.errors import PoseconsError
 from posecons.training.trainer import Trainer, train
 
@@ -44,7 +45,9 @@ def test_few_steps_every_variant(synth_data, tmp_path, constraints):
     run = tmp_path / "run"
     assert summary["steps"] == 2 and summary["skipped_steps"] == 0
     assert (run / "config.yaml").is_file() and (run / "checkpoints" / "last.pt").is_file()
-    assert load_checkpoint(run / "checkpoints" / "best.pt")["best"] == metrics_at_best(run)
+    best = load_checkpoint(run / "checkpoints" / "best.pt")
+    assert best["best"] == metrics_at_best(run, "val_photometric") and best["selected_by"] == "val_photometric"
+    assert summary["best_metric"] == "val_photometric" and summary["initialisation"].startswith("random")
     assert any((run / "tb").iterdir())
     metrics = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert metrics[-1]["step"] == 2 and 0 < metrics[-1]["val_photometric"] < 1
@@ -62,8 +65,94 @@ def test_gradient_accumulation_counts_optimiser_steps(synth_data, tmp_path):
     assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())
 
 
-def metrics_at_best(run: Path) -> float:
-    return min(json.loads(line)["abs_rel"] for line in (run / "metrics.jsonl").read_text().splitlines())
+def metrics_at_best(run: Path, key: str) -> float:
+    return min(json.loads(line)[key] for line in (run / "metrics.jsonl").read_text().splitlines())
+
+
+def test_best_checkpoint_by_ground_truth_only_when_asked(synth_data, tmp_path):
+    cfg = tiny_config("train.max_steps=4", "train.val_every=1", "train.best_metric=abs_rel", "train.lr=1e-3")
+    train(cfg, synth_data, tmp_path / "gt", quiet=True)
+    best = load_checkpoint(tmp_path / "gt" / "checkpoints" / "best.pt")
+    assert best["selected_by"] == "abs_rel" and best["best"] == metrics_at_best(tmp_path / "gt", "abs_rel")
+    split = tmp_path / "split"  # a val split whose frames have no LiDAR scans
+    split.mkdir()
+    (split / "train_files.txt").write_text((synth_data / "splits" / "synth" / "train_files.txt").read_text())
+    (split / "val_files.txt").write_text((synth_data / "splits" / "synth" / "val_files.txt").read_text())
+    lines = (split / "val_files.txt").read_text().split()
+    scan = synth_data / lines[0] / "velodyne_points" / "data" / f"{int(lines[1]):010d}.bin"
+    scan.rename(scan.with_suffix(".moved"))
+    try:
+        with pytest.raises(PoseconsError, match="best_metric=abs_rel.*no LiDAR"):
+            Trainer(cfg, synth_data, tmp_path / "nogt", split_dir=split, quiet=True)
+    finally:
+        scan.with_suffix(".moved").rename(scan)
+
+
+def _offline(monkeypatch):
+    import torchvision.models as tvm
+
+    def offline(*args, **kwargs):
+        from urllib.error import URLError
+        raise URLError("no network")
+    monkeypatch.setattr(tvm.ResNet18_Weights.IMAGENET1K_V1, "get_state_dict", offline)
+
+
+def test_paper_preset_offline_stops_and_auto_records_scratch(synth_data, tmp_path, monkeypatch):
+    _offline(monkeypatch)
+    small = [o for o in TINY if "num_layers" not in o and "pretrained" not in o] + ["model.num_layers=18"]
+    paper = load_config(resolve_preset("kitti/baseline"), small + ["train.max_steps=1"])
+    with pytest.raises(PoseconsError, match="from scratch on purpose with --set model.pretrained=false"):
+        Trainer(paper, synth_data, tmp_path / "paper", quiet=True)
+    assert not (tmp_path / "paper" / "checkpoints").exists()
+    with pytest.warns(UserWarning, match="Training from scratch") as caught:
+        summary = train(load_config(overrides=small + ["model.pretrained=auto", "train.max_steps=1"]), synth_data,
+                        tmp_path / "auto", quiet=True)
+    assert len([w for w in caught if "ImageNet" in str(w.message)]) == 1  # one message, not one per encoder
+    assert summary["initialisation"] == "random (trained from scratch)"
+    assert load_config(tmp_path / "auto" / "config.yaml").model.pretrained is False  # "auto" resolved
+    assert load_checkpoint(tmp_path / "auto" / "checkpoints" / "last.pt")["initialisation"].startswith("random")
+
+
+def test_pretrained_run_records_imagenet_and_resumes_offline(synth_data, tmp_path, monkeypatch):
+    import torchvision.models as tvm
+    state = tvm.resnet18().state_dict()
+    monkeypatch.setattr(tvm.ResNet18_Weights.IMAGENET1K_V1, "get_state_dict", lambda *a, **k: dict(state))
+    small = [o for o in TINY if "num_layers" not in o and "pretrained" not in o] + ["model.num_layers=18"]
+    cfg = load_config(resolve_preset("kitti/baseline"), small + ["train.max_steps=1", "train.val_every=1"])
+    summary = train(cfg, synth_data, tmp_path / "run", quiet=True)
+    assert summary["initialisation"] == "ImageNet (torchvision ResNet18_Weights.IMAGENET1K_V1)"
+    assert load_config(tmp_path / "run" / "config.yaml").model.pretrained is True
+    _offline(monkeypatch)  # resuming needs no download: the weights are in last.pt
+    resumed = load_config(tmp_path / "run" / "config.yaml", ["train.max_steps=2"])
+    summary = train(resumed, synth_data, tmp_path / "run", resume=True, quiet=True)
+    assert summary["steps"] == 2 and summary["initialisation"].startswith("ImageNet")
+    best = load_checkpoint(tmp_path / "run" / "checkpoints" / "best.pt")
+    assert best["initialisation"].startswith("ImageNet")
+
+
+def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, tmp_path):
+    trainer = Trainer(tiny_config("train.precision=bf16", "train.max_steps=1", "train.val_every=0"), synth_data,
+                      tmp_path / "run", quiet=True)
+    dtypes = []
+    trainer.model.depth_net.encoder.net.layer4.register_forward_hook(lambda m, i, o: dtypes.append(o.dtype))
+    trainer.fit()
+    assert dtypes and dtypes[0] == torch.bfloat16
+    with pytest.raises(PoseconsError, match="precision=16.*needs a GPU"):
+        Trainer(tiny_config("train.precision='16'"), synth_data, tmp_path / "fp16", quiet=True)
+
+
+def test_deterministic_mode_on_cuda_warns_instead_of_raising(monkeypatch):
+    from posecons.training.trainer import use_deterministic_algorithms
+    monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
+    before = torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled()
+    try:
+        use_deterministic_algorithms(torch.device("cuda", 0))
+        assert torch.are_deterministic_algorithms_enabled() and torch.is_deterministic_algorithms_warn_only_enabled()
+        assert os.environ["CUBLAS_WORKSPACE_CONFIG"] == ":4096:8"
+        use_deterministic_algorithms(torch.device("cpu"))  # the CPU has deterministic kernels for all: strict
+        assert not torch.is_deterministic_algorithms_warn_only_enabled()
+    finally:
+        torch.use_deterministic_algorithms(before[0], warn_only=before[1])
 
 
 def final_weights(run: Path) -> dict:
@@ -101,6 +190,7 @@ def test_killed_run_resumes_to_identical_weights(synth_data, tmp_path):
 DDP_SCRIPT = """
 import sys, torch, torch.distributed as dist
 from posecons.config import load_config
+from posecons.training.commands import resolve_preset
 from posecons.training.trainer import Trainer
 cfg = load_config(overrides=sys.argv[3:])
 trainer = Trainer(cfg, sys.argv[1], sys.argv[2], accelerator="cpu", quiet=True)

@@ -82,6 +82,21 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
     return model.to(map_location).eval(), config
 
 
+def describe_checkpoint(path: str | Path) -> dict[str, Any]:
+    """What a report must say of the weights it evaluated: file, step, how they were chosen, and
+    how the encoders were initialised."""
+    path = Path(path)
+    if path.suffix == ".safetensors":
+        return {"file": str(path), "selected_by": "exported weights (see the run they came from)"}
+    state = load_checkpoint(path)
+    criterion = state.get("selected_by")
+    return {"file": str(path), "step": state.get("step"),
+            "selected_by": (f"lowest validation {criterion}" + (" (ground truth)" if criterion == "abs_rel" else
+                                                                " (no ground truth)")
+                            if criterion else "none: the weights at that step"),
+            "initialisation": state.get("initialisation", "not recorded")}
+
+
 def _config(data: Any, path: Path) -> Config:
     try:
         return config_from_dict(data)

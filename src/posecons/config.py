@@ -76,6 +76,9 @@ class TrainConfig:
     image_every: int = 500
     val_every: int = 0  # steps between validations; 0: once per epoch
     val_samples: int = 500  # validation uses at most this many val-split samples, spread evenly
+    # best.pt: lowest "val_photometric" (self-supervised, the default) or "abs_rel" (needs LiDAR
+    # ground truth in the val split: supervised model selection, named as such in every report)
+    best_metric: str = "val_photometric"
     checkpoint_every: int = 500  # steps between `last` checkpoints (and at every epoch end)
     keep_epochs: int = -1  # per-epoch weight files kept (the newest); -1 keeps all, 0 none
     max_bad_steps: int = 5  # consecutive non-finite losses before the run stops
@@ -112,6 +115,8 @@ class Config:
             raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
         if self.train.precision not in ("32", "bf16", "16"):
             raise PoseconsError(f"train.precision must be '32', 'bf16' or '16', got {self.train.precision!r}")
+        if self.train.best_metric not in ("val_photometric", "abs_rel"):
+            raise PoseconsError(f"train.best_metric must be 'val_photometric' or 'abs_rel', got {self.train.best_metric!r}")
         if self.train.keep_epochs < -1:
             raise PoseconsError(f"train.keep_epochs must be -1 (keep all), 0 (none) or a count, got {self.train.keep_epochs}")
         if self.data.dataset not in ("kitti_raw", "kitti_odom"):

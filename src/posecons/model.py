@@ -20,7 +20,7 @@ from .config import Config
 from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrinsics, warp
 from .losses import (cycle_loss, forward_backward_loss, identity_loss, min_reprojection,
                      photometric_error, smoothness_loss)
-from .networks import DepthNet, PoseNet
+from .networks import DepthNet, PoseNet, imagenet_weights_name, load_imagenet_state
 
 
 class PoseConsModel(nn.Module):
@@ -28,8 +28,12 @@ class PoseConsModel(nn.Module):
         super().__init__()
         self.config = config
         m = config.model
-        self.depth_net = DepthNet(m.num_layers, m.pretrained, tuple(m.scales))
-        self.pose_net = PoseNet(m.num_layers, m.pretrained)
+        imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
+        self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
+        self.pose_net = PoseNet(m.num_layers, imagenet)
+        # How the encoders were initialised, for the run's config, checkpoints and reports.
+        self.initialisation = (f"ImageNet ({imagenet_weights_name(m.num_layers)})" if imagenet is not None
+                               else "random (trained from scratch)")
 
     # ------------------------------------------------------------------ inference API
     def predict_depth(self, images: torch.Tensor, scale: int = 0) -> tuple[torch.Tensor, torch.Tensor]:

@@ -41,11 +41,18 @@ def load_imagenet_state(num_layers: int, pretrained: bool | str) -> dict | None:
     except (URLError, OSError, RuntimeError, LookupError) as exc:
         message = (f"ImageNet weights for ResNet-{num_layers} are not available ({exc}). "
                    "With internet access torchvision downloads them into $TORCH_HOME/hub/checkpoints; "
-                   "offline, copy the file there or set model.pretrained=false.")
+                   "offline, copy the file there, or train from scratch on purpose with "
+                   "--set model.pretrained=false.")
         if pretrained is True:
             raise PoseconsError(message) from exc
         warnings.warn(message + " Training from scratch.", stacklevel=2)
         return None
+
+
+def imagenet_weights_name(num_layers: int) -> str:
+    """torchvision's name of the ImageNet weights of a ResNet, e.g. ``ResNet18_Weights.IMAGENET1K_V1``."""
+    weights = _RESNETS[num_layers][1]
+    return f"torchvision {type(weights).__name__}.{weights.name}" if weights is not None else "none"
 
 
 class GroupedBatchNorm2d(nn.BatchNorm2d):
@@ -77,19 +84,20 @@ class GroupedBatchNorm2d(nn.BatchNorm2d):
 class ResnetEncoder(nn.Module):
     """ResNet features at 1/2, 1/4, 1/8, 1/16, 1/32 of the input.
 
-    ``num_input_images=2`` widens conv1 to a 6-channel frame pair (the pose encoder); ImageNet
-    conv1 weights are then tiled over both images and halved, so a pair of equal images
-    gives the pretrained response. ``norm_layer`` replaces BatchNorm2d (same state-dict keys).
+    ``imagenet``: the ResNet's ImageNet state dict (:func:`load_imagenet_state`) or None for a
+    random initialisation. ``num_input_images=2`` widens conv1 to a 6-channel frame pair (the pose
+    encoder); ImageNet conv1 weights are then tiled over both images and halved, so a pair of
+    equal images gives the pretrained response. ``norm_layer`` replaces BatchNorm2d (same keys).
     """
 
-    def __init__(self, num_layers: int = 18, pretrained: bool | str = False, num_input_images: int = 1,
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, num_input_images: int = 1,
                  norm_layer: type[nn.BatchNorm2d] = nn.BatchNorm2d):
         super().__init__()
         if num_layers not in _RESNETS:
             raise PoseconsError(f"num_layers must be one of {sorted(_RESNETS)}, got {num_layers}")
         self.net = _RESNETS[num_layers][0](norm_layer=norm_layer)
         self.num_input_images = num_input_images
-        state = load_imagenet_state(num_layers, pretrained)
+        state = None if imagenet is None else dict(imagenet)  # the caller's dict stays as it was
         if num_input_images > 1:
             self.net.conv1 = nn.Conv2d(3 * num_input_images, 64, kernel_size=7, stride=2, padding=3, bias=False)
             if state is not None:
@@ -181,9 +189,9 @@ class PoseDecoder(nn.Module):
 class DepthNet(nn.Module):
     """One RGB frame (B, 3, H, W) → sigmoid disparities per scale."""
 
-    def __init__(self, num_layers: int = 18, pretrained: bool | str = False, scales=(0, 1, 2, 3)):
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, scales=(0, 1, 2, 3)):
         super().__init__()
-        self.encoder = ResnetEncoder(num_layers, pretrained)
+        self.encoder = ResnetEncoder(num_layers, imagenet)
         self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales)
 
     def forward(self, images: torch.Tensor) -> dict[int, torch.Tensor]:
@@ -193,9 +201,9 @@ class DepthNet(nn.Module):
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(self, num_layers: int = 18, pretrained: bool | str = False):
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None):
         super().__init__()
-        self.encoder = ResnetEncoder(num_layers, pretrained, num_input_images=2, norm_layer=GroupedBatchNorm2d)
+        self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, norm_layer=GroupedBatchNorm2d)
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
     def forward(self, image_a: torch.Tensor, image_b: torch.Tensor, groups: int = 1,

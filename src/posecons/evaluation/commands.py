@@ -147,6 +147,10 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     result = depth.evaluate_depth(disps, gts, [s.folder for s in split], scaling=args.scaling,
                                   crop=depth.CROP_FOR_GT_KIND[args.gt_kind], pred_name=pred_name,
                                   gt_name=str(gt_path))
+    if args.checkpoint is not None:
+        from ..checkpoint import describe_checkpoint
+
+        result.update(checkpoint=describe_checkpoint(args.checkpoint))
     result.update(gt_kind=args.gt_kind, predictions=pred_name, ground_truth=str(args.gt or "exported on the fly"),
                   post_process=bool(args.checkpoint and args.post_process),
                   skipped_lines=[str(split[i]) for i in result["skipped"]])
@@ -181,13 +185,20 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         model, config, device = _load_model(args)
         steps = predict_steps(model, paths, config.model.height, config.model.width, args.batch_size, device)
         estimate, source = pose.global_from_relative(steps), str(args.checkpoint)
+        from ..checkpoint import describe_checkpoint
+
+        checkpoint = describe_checkpoint(args.checkpoint)
     else:
         estimate, source = trajectory_io.read_kitti_poses(args.pred_poses), str(args.pred_poses)
         if len(estimate) != len(gt):
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
+        checkpoint = None
 
     result = pose.evaluate_pose(estimate, gt, args.const_velocity)
     result.update(predictions=source, ground_truth=str(args.gt_poses))
+    if checkpoint:
+        result.update(checkpoint=checkpoint)
+        print(f"weights: {compare.checkpoint_note(checkpoint)}")
     for name, r in (("prediction", result), (f"const. velocity ({args.const_velocity})", result["const_velocity"])):
         print(f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
               f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m")

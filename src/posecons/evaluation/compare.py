@@ -71,4 +71,13 @@ def markdown_table(results: Sequence[dict], names: Sequence[str], bold: bool = T
                 if row[col] != "–" and float(row[col]) == best:
                     row[col] = f"**{row[col]}**"
     lines = table1_header() + ["| " + " | ".join([name, *row]) + " |" for name, row in zip(names, cells)]
-    return "\n".join(lines) + "\n"
+    notes = [f"- {name}: {checkpoint_note(result['checkpoint'])}" for name, result in zip(names, results)
+             if "checkpoint" in result]
+    return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
+
+
+def checkpoint_note(info: dict) -> str:
+    """One line naming the evaluated weights and how they were chosen (``describe_checkpoint``)."""
+    step = f", step {info['step']}" if info.get("step") is not None else ""
+    return (f"{Path(info['file']).name}{step}; selected by: {info['selected_by']}; "
+            f"initialisation: {info.get('initialisation', 'not recorded')}")

@@ -19,6 +19,7 @@ resumed ends with the same weights as an uninterrupted one (in deterministic mod
 from __future__ import annotations
 
 import contextlib
+import copy
 import json
 import math
 import os
@@ -94,7 +95,7 @@ class Trainer:
             raise PoseconsError("train.precision=16 (float16 with a gradient scaler) needs a GPU; "
                                 "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32")
         if t.deterministic:
-            torch.use_deterministic_algorithms(True)
+            use_deterministic_algorithms(self.device)
         self._seed_everything(t.seed + self.env.rank)
 
         train_file, val_file = split_files(config, data_path, split_dir)
@@ -102,9 +103,18 @@ class Trainer:
         if len(self.train_set) < t.batch_size * self.env.world:
             raise PoseconsError(f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
                                 f"({t.batch_size} × {self.env.world} processes)")
-        self.validator = Validator(config, data_path, val_file, self.out, self.device) if val_file else None
+        # Validation (and its one-off ground-truth export) happens on the main rank only.
+        self.validator = (Validator(config, data_path, val_file, self.out, self.device)
+                          if val_file and self.env.main else None)
+        if t.best_metric == "abs_rel" and self.env.main and not (self.validator and self.validator.gt is not None):
+            raise PoseconsError("train.best_metric=abs_rel selects best.pt by ground truth, but the validation split "
+                                f"{val_file or '(none)'} has no LiDAR scans; use train.best_metric=val_photometric")
 
-        model = PoseConsModel(config).to(self.device)
+        # A resumed run takes its weights from last.pt: nothing is downloaded, so it also resumes offline.
+        model = PoseConsModel(_without_imagenet(config) if resume else config).to(self.device)
+        if not resume:  # the run's config says what "auto" resolved to
+            config.model.pretrained = model.initialisation.startswith("ImageNet")
+        self.initialisation = model.initialisation
         if t.sync_bn and self.env.world > 1:  # the pose net keeps its per-pair-group statistics
             model.depth_net = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model.depth_net)
         self.model = model
@@ -115,11 +125,13 @@ class Trainer:
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=t.precision == "16")
         self.steps_per_epoch = len(self.train_set) // (t.batch_size * self.env.world * t.grad_accum)
         self.step = self.epoch = self.batch_in_epoch = self.bad_steps = self.skipped_steps = 0
-        self.best = math.inf  # best validation score so far (abs rel with ground truth, else photometric)
+        self.best = math.inf  # best validation value of train.best_metric so far
         if resume:
             self._load(self.out / "checkpoints" / "last.pt")
         elif self.env.main:
             (self.out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
+        if not self.quiet:
+            print(f"initialisation: {self.initialisation}; best.pt selected by {describe_selection(t.best_metric)}")
         self.writer = None
         if self.env.main:
             from torch.utils.tensorboard import SummaryWriter
@@ -136,17 +148,19 @@ class Trainer:
             "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
             "scaler": self.scaler.state_dict(), "step": self.step, "epoch": self.epoch,
             "batch_in_epoch": self.batch_in_epoch, "bad_steps": self.bad_steps, "skipped_steps": self.skipped_steps,
-            "best": self.best,
+            "best": self.best, "initialisation": self.initialisation,
             "rng": {"torch": torch.get_rng_state(), "python": random.getstate(),
                     "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else []},
         }
 
     def _load(self, path: Path) -> None:
         state = load_checkpoint(path, map_location=self.device)
-        saved = state["config"]
-        if saved["model"] != self.config.to_dict()["model"]:
-            raise PoseconsError(f"{path}: its model config {saved['model']} differs from the requested "
-                                f"{self.config.to_dict()['model']}; resume with the run's own config.yaml")
+        saved, requested = _without_imagenet(state["config"])["model"], _without_imagenet(self.config.to_dict())["model"]
+        if saved != requested:
+            raise PoseconsError(f"{path}: its model config {saved} differs from the requested "
+                                f"{requested}; resume with the run's own config.yaml")
+        self.config.model.pretrained = state["config"]["model"]["pretrained"]
+        self.initialisation = state.get("initialisation", "not recorded (checkpoint predates the record)")
         try:
             self.model.load_state_dict(state["model"])
         except RuntimeError as exc:
@@ -168,12 +182,14 @@ class Trainer:
         if self.env.main:
             save_checkpoint(self.out / "checkpoints" / "last.pt", self.state())
 
-    def save_weights(self, name: str) -> None:
-        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict."""
+    def save_weights(self, name: str, selected_by: str | None = None) -> None:
+        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
+        ``selected_by`` says how a selected checkpoint (best.pt) was chosen."""
         if self.env.main:
             save_checkpoint(self.out / "checkpoints" / name,
                             {"config": self.config.to_dict(), "model": self.model.state_dict(),
-                             "step": self.step, "epoch": self.epoch, "best": self.best})
+                             "step": self.step, "epoch": self.epoch, "best": self.best,
+                             "selected_by": selected_by, "initialisation": self.initialisation})
 
     def _save_epoch(self) -> None:
         keep = self.config.train.keep_epochs
@@ -245,7 +261,8 @@ class Trainer:
         if t.val_every and self.step % t.val_every:
             last_metrics = self.validate()
         summary = {"steps": self.step, "epochs": self.epoch, "skipped_steps": self.skipped_steps,
-                   "minutes": (time.time() - start) / 60, "last_validation": last_metrics}
+                   "minutes": (time.time() - start) / 60, "initialisation": self.initialisation,
+                   "best_metric": t.best_metric, "last_validation": last_metrics}
         if self.writer:
             self.writer.close()
         return summary
@@ -314,11 +331,38 @@ class Trainer:
             for k, v in metrics.items():
                 if isinstance(v, (int, float)) and math.isfinite(v):
                     self.writer.add_scalar(f"val/{k}", v, self.step)
-        score = metrics.get("abs_rel", metrics["val_photometric"])
+        score = metrics[self.config.train.best_metric]
         if score < self.best:
             self.best = score
-            self.save_weights("best.pt")
+            self.save_weights("best.pt", selected_by=self.config.train.best_metric)
         return metrics
+
+
+def describe_selection(best_metric: str) -> str:
+    """How best.pt is chosen, in words for logs and reports."""
+    return {"val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
+            "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)"}[best_metric]
+
+
+def _without_imagenet(config):
+    """A copy of a Config (or its dict) that builds the networks without fetching ImageNet weights."""
+    config = copy.deepcopy(config)
+    if isinstance(config, dict):
+        config["model"]["pretrained"] = False
+    else:
+        config.model.pretrained = False
+    return config
+
+
+def use_deterministic_algorithms(device: torch.device) -> None:
+    """Deterministic kernels for exact resume. On CUDA, cuBLAS needs a fixed workspace and some
+    backward kernels (grid_sample, reflection padding, bilinear interpolation) have no
+    deterministic version: PyTorch then warns instead of raising, and results can differ in
+    the last bits between runs."""
+    if device.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        torch.backends.cudnn.benchmark = False
+    torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
 
 
 def _as_tuple(value):
