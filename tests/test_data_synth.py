@@ -115,7 +115,9 @@ def test_raw_dataset_sizes_flip_and_determinism(synth: Path) -> None:
     assert sample["color_aug"].tolist() == [1, 1, 1, 0]
     flipped = KittiRawDataset(synth, split, H // 2, W // 2, flip_prob=1.0, jitter_prob=0.0)[0]
     assert torch.equal(flipped["frames"], sample["frames"].flip(-1))
-    assert flipped["intrinsics"][0, 2].item() == pytest.approx(1 - sample["intrinsics"][0, 2].item())
+    # integer pixel centres: cx ↦ W − 1 − cx in pixels at the network width
+    assert flipped["intrinsics"][0, 2].item() * (W // 2) == pytest.approx(
+        W // 2 - 1 - sample["intrinsics"][0, 2].item() * (W // 2), abs=1e-4)
     assert not torch.equal(sample["frames"][1], sample["frames"][0])  # the neighbour frames differ
     augmented = KittiRawDataset(synth, split, H // 2, W // 2, seed=7, flip_prob=0.5, jitter_prob=1.0)
     draws = [augmented[i]["color_aug"] for i in range(3)]

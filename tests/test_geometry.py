@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from posecons.geometry import (axis_angle_to_matrix, backproject, disp_to_depth, invert_pose, make_pose,
+from posecons.geometry import (axis_angle_to_matrix, backproject, disp_to_depth, flip_intrinsics, invert_pose, make_pose,
                                pose_distance, pose_vec_to_mat, project, scale_intrinsics, warp)
 
 
@@ -153,3 +153,22 @@ def test_bad_shapes_and_dtypes_name_the_argument():
         invert_pose(torch.zeros(2, 4, 4, dtype=torch.long))
     with pytest.raises(ValueError, match="depth"):
         backproject(torch.zeros(2, 16, 32), torch.eye(3).expand(2, 3, 3))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_warping_a_flipped_frame_with_the_flipped_k_is_the_flipped_warp(dtype):
+    # A mirror image is the view of the mirrored world: x ↦ −x turns T into S·T·S, S = diag(−1, 1, 1, 1).
+    h, w = 24, 40
+    K_norm = torch.tensor([[[0.7, 0, 0.43], [0, 1.9, 0.55], [0, 0, 1]]], dtype=dtype)  # off-centre cx
+    src = torch.rand(1, 3, h, w, dtype=dtype)
+    depth = torch.rand(1, 1, h, w, dtype=dtype) * 10 + 5
+    T = pose_vec_to_mat(torch.tensor([[[0.02, -0.05, 0.01]]], dtype=dtype), torch.tensor([[[0.3, 0.1, -0.4]]], dtype=dtype))
+    S = torch.diag(torch.tensor([-1.0, 1, 1, 1], dtype=dtype))
+    warped = warp(src, depth, T, scale_intrinsics(K_norm, h, w))
+    flipped = warp(src.flip(-1), depth.flip(-1), S @ T @ S, scale_intrinsics(flip_intrinsics(K_norm, w), h, w))
+    assert torch.allclose(flipped, warped.flip(-1), atol=1e-4 if dtype == torch.float32 else 1e-6)  # project() adds eps to z
+    # cx ↦ 1 − cx, the first-order rule, is a pixel off
+    naive = K_norm.clone()
+    naive[0, 0, 2] = 1 - naive[0, 0, 2]
+    off = warp(src.flip(-1), depth.flip(-1), S @ T @ S, scale_intrinsics(naive, h, w))
+    assert (off - warped.flip(-1)).abs().max() > 0.05

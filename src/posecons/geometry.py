@@ -119,6 +119,18 @@ def scale_intrinsics(K_norm: torch.Tensor, height: int, width: int) -> torch.Ten
     return K_norm * scale
 
 
+def flip_intrinsics(K_norm: torch.Tensor, width: int) -> torch.Tensor:
+    """Normalised K (..., 3, 3) of the horizontally mirrored image, ``width`` pixels wide.
+
+    With integer pixel centres a flip maps u ↦ W − 1 − u, so cx ↦ W − 1 − cx in pixels and
+    cx/W ↦ 1 − cx/W − 1/W normalised (1 − cx to first order). Exact at the resolution ``width``;
+    at pyramid level s the normalised-K convention rescales it to cx_s' = W_s − cx_s − 2⁻ˢ.
+    """
+    flipped = K_norm.clone()
+    flipped[..., 0, 2] = (width - 1) / width - K_norm[..., 0, 2]
+    return flipped
+
+
 def pixel_grid(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
     """Homogeneous pixel coordinates (3, H·W): rows u, v, 1 (u along the width)."""
     v, u = torch.meshgrid(
@@ -175,7 +187,7 @@ def warp(source: torch.Tensor, depth: torch.Tensor, T: torch.Tensor, K: torch.Te
 
 
 __all__ = [
-    "axis_angle_to_matrix", "backproject", "check_tensor", "disp_to_depth", "invert_pose",
+    "axis_angle_to_matrix", "backproject", "check_tensor", "disp_to_depth", "flip_intrinsics", "invert_pose",
     "make_pose", "pixel_grid", "pixels_to_grid", "pose_distance", "pose_vec_to_mat", "project",
     "scale_intrinsics", "transform_points", "warp",
 ]

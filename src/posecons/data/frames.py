@@ -2,7 +2,7 @@
 
 Sample contract (the model relies on it):
     ``frames``     float32 (F, 3, H, W) in [0, 1], in ``frame_ids`` order, flipped if drawn;
-    ``intrinsics`` float32 (3, 3) K normalised by image size, cx → 1 − cx when flipped;
+    ``intrinsics`` float32 (3, 3) K normalised by image size, mirrored when flipped (``flip_intrinsics``);
     ``color_aug``  float32 (4,) jitter factors (b, c, s, h), (1, 1, 1, 0) when not drawn;
     ``index`` int, ``folder`` str, ``frame`` int, ``side`` str.
 """
@@ -18,6 +18,7 @@ from PIL import Image
 from torch.utils.data import Dataset
 
 from ..errors import PoseconsError
+from ..geometry import flip_intrinsics
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
 from .calib import KITTI_FIXED_K
 from .io import load_rgb
@@ -106,12 +107,10 @@ class FrameDataset(Dataset):
         else:
             flip, jitter = False, np.array(IDENTITY_JITTER, dtype=np.float32)
         frames = torch.stack([self.load_frame(self.image_path(line, line.frame + f), flip) for f in self.frame_ids])
-        k = self.intrinsics(line).copy()
-        if flip:
-            k[0, 2] = 1.0 - k[0, 2]
+        k = torch.from_numpy(self.intrinsics(line).astype(np.float32))
         return {
             "frames": frames,
-            "intrinsics": torch.from_numpy(k),
+            "intrinsics": flip_intrinsics(k, self.width) if flip else k,
             "color_aug": torch.from_numpy(jitter),
             "index": index,
             "folder": line.folder,
