@@ -152,3 +152,22 @@ def test_synth_is_deterministic(synth: Path, tmp_path: Path) -> None:
     for rel in (f"{drive_folder(0)}/image_02/data/0000000005.png", f"{drive_folder(1)}/velodyne_points/data/0000000007.bin",
                 "odometry/poses/01.txt", "splits/synth/train_files.txt", "synth.json"):
         assert (out / rel).read_bytes() == (synth / rel).read_bytes(), rel
+
+
+def test_training_frames_are_decoded_and_resized_as_evaluation_does(tmp_path: Path) -> None:
+    # A JPEG at KITTI size read at a quarter of it: JPEG draft (DCT) decoding would differ here.
+    from PIL import Image
+
+    from posecons.evaluation.predict import load_image
+
+    rng = np.random.default_rng(0)
+    drive = tmp_path / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"
+    drive.mkdir(parents=True)
+    for frame in range(3):
+        pixels = rng.integers(0, 256, (375, 1242, 3), dtype=np.uint8)
+        Image.fromarray(pixels).save(drive / f"{frame:010d}.jpg", quality=90)
+    calib = Path(__file__).resolve().parents[1].parent / "shared" / "kitti" / "calib" / "2011_09_26"
+    (tmp_path / "2011_09_26" / "calib_cam_to_cam.txt").write_text((calib / "calib_cam_to_cam.txt").read_text())
+    split = ["2011_09_26/2011_09_26_drive_0001_sync 1 l"]
+    sample = KittiRawDataset(tmp_path, split, 96, 320, img_ext=".jpg", train=False)[0]
+    assert torch.equal(sample["frames"][0], load_image(drive / "0000000001.jpg", 96, 320))

@@ -14,14 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 from torch.utils.data import Dataset
 
 from ..errors import PoseconsError
 from ..geometry import flip_intrinsics
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
 from .calib import KITTI_FIXED_K
-from .io import load_rgb
+from .io import load_rgb, resize_rgb
 from .splits import SplitLine, SplitSource, read_split
 
 
@@ -92,13 +91,10 @@ class FrameDataset(Dataset):
         return len(self.lines)
 
     def load_frame(self, path: Path, flip: bool) -> torch.Tensor:
-        """Decode once, resize once (antialiased bilinear), flip: (3, H, W) float32 in [0, 1]."""
-        img = load_rgb(path, draft_size=(self.width, self.height))
-        if img.size != (self.width, self.height):
-            img = img.resize((self.width, self.height), Image.BILINEAR)
-        if flip:
-            img = img.transpose(Image.FLIP_LEFT_RIGHT)
-        return torch.from_numpy(np.asarray(img).copy()).permute(2, 0, 1).float().div_(255.0)
+        """Decode and resize exactly as evaluation and inference do (``resize_rgb``), then flip:
+        (3, H, W) float32 in [0, 1]."""
+        image = torch.from_numpy(resize_rgb(np.asarray(load_rgb(path)), self.height, self.width))
+        return image.flip(-1) if flip else image
 
     def __getitem__(self, index: int) -> dict:
         line = self.lines[index]

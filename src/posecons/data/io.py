@@ -26,17 +26,11 @@ def require_file(path: Path, what: str) -> Path:
     return path
 
 
-def load_rgb(path: Path, draft_size: tuple[int, int] | None = None) -> Image.Image:
-    """Open an image file as an RGB PIL image (decoded now, so errors surface here).
-
-    ``draft_size`` (width, height) lets JPEG decoding shrink by a power of two while staying at
-    least that large, which makes the later resize much cheaper.
-    """
+def load_rgb(path: Path) -> Image.Image:
+    """Open an image file as an RGB PIL image (decoded now, so errors surface here)."""
     require_file(path, "image")
     try:
         with Image.open(path) as img:
-            if draft_size is not None:
-                img.draft("RGB", draft_size)
             return img.convert("RGB")
     except OSError as exc:
         raise PoseconsError(f"{path}: unreadable image ({exc})") from exc
