@@ -143,6 +143,10 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         disps, pred_name = load_pred_disps(args.pred_disps), str(args.pred_disps)
     if len(split) != len(gts):
         raise PoseconsError(f"{args.split_file} has {len(split)} lines but {gt_path} has {len(gts)} frames")
+    for line, stored in zip(split, read_split(gt_lines)):  # the same frames in the same order, not just as many
+        if str(line) != str(stored):
+            raise PoseconsError(f"{line.where}: '{line}' does not match line '{stored}' that {gt_path} was "
+                                "exported for; pass the split file the ground truth was exported from")
 
     result = depth.evaluate_depth(disps, gts, [s.folder for s in split], scaling=args.scaling,
                                   crop=depth.CROP_FOR_GT_KIND[args.gt_kind], pred_name=pred_name,
