@@ -268,3 +268,13 @@ def test_non_finite_loss_is_skipped_then_stops(synth_data, tmp_path, monkeypatch
         trainer.fit()
     assert trainer.skipped_steps == 3
     assert load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")["step"] >= 2
+
+
+def test_only_the_main_rank_validates_and_exports_ground_truth(synth_data, tmp_path, monkeypatch):
+    monkeypatch.setenv("RANK", "1")  # a second process of a run; world size 1 keeps it without a process group
+    (tmp_path / "run").mkdir()
+    worker = Trainer(tiny_config("train.max_steps=1"), synth_data, tmp_path / "run", quiet=True)
+    assert worker.validator is None and not (tmp_path / "run" / "val_gt.npz").exists()
+    monkeypatch.setenv("RANK", "0")
+    main = Trainer(tiny_config("train.max_steps=1"), synth_data, tmp_path / "run0", quiet=True)
+    assert main.validator is not None and (tmp_path / "run0" / "val_gt.npz").is_file()
