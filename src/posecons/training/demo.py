@@ -19,10 +19,9 @@ import torch  # noqa: E402
 
 from ..checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from ..cli import main as cli  # noqa: E402
-from ..config import load_config  # noqa: E402
+from ..config import load_config, resolve_preset  # noqa: E402
 from ..errors import PoseconsError  # noqa: E402
 from ..model import PoseConsModel  # noqa: E402
-from .commands import resolve_preset  # noqa: E402
 from .trainer import train  # noqa: E402
 
 # The demo's synthetic data set: small frames keep decoding cheap on a 2-core CPU.
