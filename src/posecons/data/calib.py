@@ -90,18 +90,31 @@ def raw_projection(date_dir: Path, cam: int = 2) -> tuple[np.ndarray, tuple[int,
     return p_rect, (int(round(width)), int(round(height)))
 
 
-def normalised_k(p_rect: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(3, 3) float32 intrinsics normalised by image size (row 0 / W, row 1 / H)."""
-    k = np.array(p_rect[:3, :3], dtype=np.float64)
-    k[0] /= width
-    k[1] /= height
-    return k.astype(np.float32)
+def pixel_to_normalised(K: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(3, 3) float64 K normalised by image size (row 0 / W, row 1 / H) from the pixel K of an image of
+    height × width (the first three columns of a projection matrix are such a K).
+
+    Arguments in (height, width) order, as torch and :func:`posecons.geometry.scale_intrinsics`.
+    """
+    K = np.array(K[:3, :3], dtype=np.float64)
+    K[0] /= width
+    K[1] /= height
+    return K
+
+
+def normalised_to_pixel(K_norm: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(3, 3) normalised K → float64 pixel K of an image of height × width (numpy twin of
+    :func:`posecons.geometry.scale_intrinsics`)."""
+    K = np.array(K_norm, dtype=np.float64)
+    K[0] *= width
+    K[1] *= height
+    return K
 
 
 def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
-    """Normalised (3, 3) K of rectified camera ``cam`` of a raw date folder."""
+    """Normalised (3, 3) float32 K of rectified camera ``cam`` of a raw date folder."""
     p_rect, (width, height) = raw_projection(date_dir, cam)
-    return normalised_k(p_rect, width, height)
+    return pixel_to_normalised(p_rect, height, width).astype(np.float32)
 
 
 def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:

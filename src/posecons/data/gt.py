@@ -16,8 +16,7 @@ from PIL import Image
 from ..errors import PoseconsError
 from .calib import raw_projection, velo_to_image
 from .io import atomic_file, load_velodyne, require_file
-from .splits import SIDE_TO_CAMERA as CAMERA
-from .splits import SplitSource, read_split
+from .splits import SIDE_TO_CAMERA, SplitSource, read_split
 
 DepthKind = Literal["velo_x", "camera_z"]
 
@@ -64,16 +63,16 @@ def read_improved_gt(path: Path) -> np.ndarray:
 def lidar_gt(data_path: Path, folder: str, frame: int, side: str = "l", depth: DepthKind = "velo_x") -> np.ndarray:
     """Depth map of one raw frame from its Velodyne scan and its date's calibration."""
     date_dir = Path(data_path) / folder.split("/")[0]
-    _, (width, height) = raw_projection(date_dir, CAMERA[side])
+    _, (width, height) = raw_projection(date_dir, SIDE_TO_CAMERA[side])
     scan = load_velodyne(Path(data_path) / folder / "velodyne_points" / "data" / f"{frame:010d}.bin")
-    return velo_to_depth_map(scan, velo_to_image(date_dir, CAMERA[side]), width, height, depth)
+    return velo_to_depth_map(scan, velo_to_image(date_dir, SIDE_TO_CAMERA[side]), width, height, depth)
 
 
 def improved_gt_path(data_path: Path, folder: str, frame: int, side: str = "l", root: Optional[Path] = None) -> Path:
     """``<data_path>/<folder>/proj_depth/…`` or, with ``root`` (KITTI's depth_annotated layout),
     ``<root>/<drive>/proj_depth/groundtruth/image_0k/<frame:010d>.png``."""
     base = Path(data_path) / folder if root is None else Path(root) / Path(folder).name
-    return base / "proj_depth" / "groundtruth" / f"image_0{CAMERA[side]}" / f"{frame:010d}.png"
+    return base / "proj_depth" / "groundtruth" / f"image_0{SIDE_TO_CAMERA[side]}" / f"{frame:010d}.png"
 
 
 def export_gt(

@@ -8,11 +8,10 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-from .calib import calib_matrix, normalised_k, read_calib_file
+from .calib import calib_matrix, pixel_to_normalised, read_calib_file
 from .frames import FrameDataset
 from .io import require_file
-from .splits import SIDE_TO_CAMERA as CAMERA
-from .splits import SplitLine
+from .splits import SIDE_TO_CAMERA, SplitLine
 
 
 def sequence_dir(data_path: Path, sequence: int | str) -> Path:
@@ -52,7 +51,7 @@ def write_poses(path: Path, poses: np.ndarray) -> None:
 
 def list_sequence_frames(data_path: Path, sequence: int | str, side: str = "l", img_ext: str = ".png") -> list[Path]:
     """Sorted image paths of one sequence's camera 2 (``l``) or 3 (``r``), for evaluation."""
-    folder = sequence_dir(data_path, sequence) / f"image_{CAMERA[side]}"
+    folder = sequence_dir(data_path, sequence) / f"image_{SIDE_TO_CAMERA[side]}"
     frames = sorted(p for p in folder.glob(f"*{img_ext}") if p.stem.isdigit())
     if not frames:
         raise PoseconsError(f"{folder}: no *{img_ext} frames found")
@@ -66,7 +65,7 @@ class KittiOdometryDataset(FrameDataset):
     """
 
     def image_path(self, line: SplitLine, frame: int) -> Path:
-        folder = sequence_dir(self.data_path, line.folder) / f"image_{CAMERA[line.side]}"
+        folder = sequence_dir(self.data_path, line.folder) / f"image_{SIDE_TO_CAMERA[line.side]}"
         return folder / f"{frame:06d}{self.img_ext}"
 
     def calib_k(self, line: SplitLine) -> np.ndarray:
@@ -76,7 +75,8 @@ class KittiOdometryDataset(FrameDataset):
             with Image.open(image) as img:
                 width, height = img.size
             calib = sequence_dir(self.data_path, line.folder) / "calib.txt"
-            self._k_cache[key] = normalised_k(read_odometry_projection(calib, CAMERA[line.side]), width, height)
+            P = read_odometry_projection(calib, SIDE_TO_CAMERA[line.side])
+            self._k_cache[key] = pixel_to_normalised(P, height, width).astype(np.float32)
         return self._k_cache[key]
 
     def __init__(self, *args, **kwargs) -> None:

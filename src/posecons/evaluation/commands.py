@@ -131,7 +131,8 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         gts, gt_lines, gt_path = _ground_truth(args, Path(tmp))
     split = read_split(args.split_file if args.split_file else gt_lines)
     if args.checkpoint is not None:
-        from .predict import predict_disparities, split_image_paths
+        from ..data.kitti_raw import split_image_paths
+        from .predict import predict_disparities
 
         model, config, device = _load_model(args)
         disps = predict_disparities(model, split_image_paths(args.data_path, split), config.model.height,

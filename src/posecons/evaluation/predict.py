@@ -13,24 +13,7 @@ import numpy as np
 import torch
 
 from ..data.io import load_rgb, resize_rgb
-from ..data.kitti_raw import CAMERA
-from ..data.splits import SplitSource, read_split
 from ..errors import PoseconsError
-
-IMAGE_EXTENSIONS = (".png", ".jpg")
-
-
-def _existing(stem: Path) -> Path:
-    for ext in IMAGE_EXTENSIONS:
-        if stem.with_suffix(ext).is_file():
-            return stem.with_suffix(ext)
-    raise PoseconsError(f"{stem}.png / .jpg: image not found")
-
-
-def split_image_paths(data_path: str | Path, split: SplitSource) -> list[Path]:
-    """KITTI raw image of each split line: ``D/<folder>/image_0{2,3}/data/<frame:010d>.{png,jpg}``."""
-    return [_existing(Path(data_path) / s.folder / f"image_0{CAMERA[s.side]}" / "data" / f"{s.frame:010d}")
-            for s in read_split(split)]
 
 
 def load_image(path: Path, height: int, width: int) -> torch.Tensor:

@@ -9,26 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.calib import KITTI_FIXED_K, calib_matrix, read_calib_file
+from ..data.calib import KITTI_FIXED_K, calib_matrix, pixel_to_normalised, read_calib_file
 from ..errors import PoseconsError
 
 CALIB_KEYS = ("P_rect_02", "P2")  # raw calib_cam_to_cam.txt, odometry calib.txt
-
-
-def pixel_to_normalised(K: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(3, 3) pixel K of an image of height × width → normalised K."""
-    K = np.array(K, dtype=np.float64)
-    K[0] /= width
-    K[1] /= height
-    return K
-
-
-def normalised_to_pixel(K_norm: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(3, 3) normalised K → pixel K of an image of height × width."""
-    K = np.array(K_norm, dtype=np.float64)
-    K[0] *= width
-    K[1] *= height
-    return K
 
 
 def parse_intrinsics(text: str) -> np.ndarray:

@@ -31,13 +31,14 @@ import torch.nn.functional as F
 from PIL import Image
 from tqdm import tqdm
 
+from ..data.calib import normalised_to_pixel
+from ..data.io import resize_rgb
 from ..errors import PoseconsError
 from ..evaluation.pose import global_from_relative
 from ..evaluation.trajectory_io import write_kitti_poses, write_tum
 from . import scale as scaling
 from .backend import Predictor
-from .camera import normalised_to_pixel, resolve_intrinsics
-from ..data.io import resize_rgb
+from .camera import resolve_intrinsics
 from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, staged_output
 from .plots import colorize, plot_scale_drift, plot_topview
 from .pointcloud import depth_to_points, write_ply

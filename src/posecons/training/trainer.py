@@ -39,7 +39,7 @@ from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
 from ..errors import PoseconsError
 from ..model import PoseConsModel
-from .data import build_dataset, split_files
+from ..data.datasets import build_dataset, split_files
 from .validation import Validator
 
 

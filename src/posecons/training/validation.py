@@ -18,7 +18,7 @@ from ..config import Config
 from ..data.gt import export_gt, load_gt
 from ..evaluation.depth import evaluate_depth
 from ..geometry import disp_to_depth
-from .data import build_dataset
+from ..data.datasets import build_dataset
 
 
 class Validator:
