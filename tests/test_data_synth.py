@@ -13,13 +13,14 @@ from posecons.cli import main
 from posecons.data.calib import raw_intrinsics, velo_to_image
 from posecons.data.gt import load_gt
 from posecons.data.io import load_velodyne
-from posecons.data.kitti_odometry import KittiOdometryDataset, list_sequence_frames, read_poses
+from posecons.data.kitti_odometry import KittiOdometryDataset, list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts
 from posecons.data.splits import build_split, read_split
 from posecons.data.synth import drive_folder, make_drive
 from posecons.data.synth.render import camera_depth_at
 from posecons.data.synth.rig import Rig
+from posecons.data.trajectory_io import read_kitti_poses
 
 W, H, FRAMES, SEED = 312, 96, 12, 3
 
@@ -96,7 +97,7 @@ def test_oxts_and_odometry_poses_reproduce_trajectory(synth: Path) -> None:
     speed = np.hypot(packets[:, 6], packets[:, 7]) / 10  # m/s at 10 Hz → m per frame
     assert 0.4 < speed.mean() < 1.6
     cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])
-    np.testing.assert_allclose(read_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0, atol=1e-6)
+    np.testing.assert_allclose(read_kitti_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0, atol=1e-6)
 
 
 def _relative_world(poses: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from posecons.checkpoint import load_model, save_checkpoint
 from posecons.cli import main
 from posecons.config import load_config
 from posecons.data.synth import drive_folder, generate_synth
-from posecons.evaluation.trajectory_io import read_kitti_poses, read_tum
+from posecons.data.trajectory_io import read_kitti_poses, read_tum
 from posecons.geometry import backproject
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor

@@ -107,3 +107,29 @@ def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
     except (OSError, KeyError, ValueError) as exc:
         raise PoseconsError(f"{path}: not a posecons ground-truth file ({exc})") from exc
     return maps, lines
+
+
+class GroundTruth:
+    """Per-frame depth ground truth (metres, 0 = invalid): a folder of 16-bit KITTI-style PNGs
+    (value / 256) named like the input frames, or an export-gt NPZ (keys 000000, 000001, … by
+    frame index, plus ``lines``)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.npz = None
+        if self.path.is_file() and self.path.suffix == ".npz":
+            try:
+                self.npz = np.load(self.path, allow_pickle=False)
+                self.keys = set(self.npz.files)
+            except (OSError, ValueError) as exc:
+                raise PoseconsError(f"{self.path}: not a readable ground-truth NPZ ({exc})") from exc
+        elif not self.path.is_dir():
+            raise PoseconsError(f"{self.path}: ground truth must be a folder of 16-bit PNGs or an .npz file")
+
+    def get(self, name: str, index: int) -> np.ndarray | None:
+        """(H, W) float32 depth of the frame called ``name`` at ``index``, or None if there is none."""
+        if self.npz is not None:
+            key = f"{index:06d}"
+            return self.npz[key].astype(np.float32) if key in self.keys else None
+        png = self.path / f"{name}.png"
+        return read_improved_gt(png) if png.is_file() else None

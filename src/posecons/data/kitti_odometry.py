@@ -1,4 +1,5 @@
-"""KITTI odometry: ``sequences/NN/{calib.txt,times.txt,image_2,image_3}`` and ``poses/NN.txt``."""
+"""KITTI odometry: ``sequences/NN/{calib.txt,image_2,image_3}``; the ``poses/NN.txt`` and ``times.txt``
+files are read by :mod:`.trajectory_io`."""
 
 from __future__ import annotations
 
@@ -23,30 +24,6 @@ def read_odometry_projection(calib_path: Path, cam: int = 2) -> np.ndarray:
     """``P<cam>`` (3, 4) from a sequence's ``calib.txt`` (pixel units)."""
     calib_path = Path(calib_path)
     return calib_matrix(read_calib_file(calib_path), f"P{cam}", (3, 4), calib_path)
-
-
-def read_poses(path: Path) -> np.ndarray:
-    """``poses/NN.txt`` → (N, 4, 4) float64 camera-0 → world poses (12 numbers a line, row-major 3×4)."""
-    path = require_file(Path(path), "pose file")
-    rows = []
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            values = [float(v) for v in line.split()]
-        except ValueError:
-            values = []
-        if len(values) != 12:
-            raise PoseconsError(f"{path}:{number}: expected 12 numbers, got {line.strip()[:60]!r}")
-        rows.append(values)
-    poses = np.tile(np.eye(4), (len(rows), 1, 1))
-    poses[:, :3, :] = np.asarray(rows).reshape(-1, 3, 4)
-    return poses
-
-
-def write_poses(path: Path, poses: np.ndarray) -> None:
-    """Write (N, 4, 4) poses in the KITTI format (first 3 rows, row-major, 12 numbers a line)."""
-    np.savetxt(path, np.asarray(poses)[:, :3, :].reshape(-1, 12), fmt="%.9e")
 
 
 def list_sequence_frames(data_path: Path, sequence: int | str, side: str = "l", img_ext: str = ".png") -> list[Path]:

@@ -16,7 +16,7 @@ from torch.utils.data import DataLoader, Subset
 
 from ..config import Config
 from ..data.gt import export_gt, load_gt
-from ..evaluation.depth import evaluate_depth
+from ..metrics.depth import evaluate_depth
 from ..geometry import disp_to_depth
 from ..data.datasets import build_dataset
 
