@@ -1,5 +1,5 @@
-"""The demo pipeline end to end at toy size: every stage runs through the real commands and the
-report, plots and summary come out (learning itself is asserted in test_training's overfit)."""
+"""The demo pipeline end to end at toy size: every stage runs through the library functions the
+commands call, and the report, plots and summary come out (learning itself is asserted in test_training's overfit)."""
 
 import json
 
@@ -12,8 +12,7 @@ pytestmark = pytest.mark.slow
 
 def test_demo_writes_report_summary_and_plots(tmp_path):
     out = tmp_path / "demo"
-    summary = run_demo(out, synth_args=["--drives", "2", "--frames", "14", "--width", "192", "--height", "64",
-                                        "--neighbours", "3"],
+    summary = run_demo(out, synth={"drives": 2, "frames": 14, "width": 192, "height": 64, "neighbours": 3},
                        overrides=["train.max_steps=3", "train.val_every=3", "train.batch_size=2", "train.val_samples=4"])
     saved = json.loads((out / "summary.json").read_text())
     for key in ("abs_rel", "abs_rel_untrained", "scale_cv", "ate_mean", "minutes"):
