@@ -4,8 +4,18 @@ import numpy as np
 import pytest
 
 from posecons.errors import PoseconsError
-from posecons.metrics.depth import (MAX_DEPTH, MIN_DEPTH, compute_depth_metrics, drift_stats, evaluate_depth,
-                                    frame_scale, garg_crop_bounds, resize_disparity, scale_consistency, valid_mask)
+from posecons.metrics.depth import (
+    MAX_DEPTH,
+    MIN_DEPTH,
+    compute_depth_metrics,
+    drift_stats,
+    evaluate_depth,
+    frame_scale,
+    garg_crop_bounds,
+    resize_disparity,
+    scale_consistency,
+    valid_mask,
+)
 
 
 def test_garg_crop_bounds_on_a_kitti_frame():

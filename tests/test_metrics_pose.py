@@ -5,9 +5,19 @@ import pytest
 
 from posecons.data.trajectory_io import read_kitti_poses
 from posecons.errors import PoseconsError
-from posecons.metrics.pose import (apply_sim3, constant_velocity_steps, evaluate_pose, global_from_relative,
-                                   invert_rigid, quaternion_to_rotation, relative_from_global, relative_pose_error,
-                                   rotation_to_quaternion, snippet_errors, umeyama)
+from posecons.metrics.pose import (
+    apply_sim3,
+    constant_velocity_steps,
+    evaluate_pose,
+    global_from_relative,
+    invert_rigid,
+    quaternion_to_rotation,
+    relative_from_global,
+    relative_pose_error,
+    rotation_to_quaternion,
+    snippet_errors,
+    umeyama,
+)
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -89,7 +89,7 @@ class Config:
     data: DataConfig = field(default_factory=DataConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
 
-    def validate(self) -> "Config":
+    def validate(self) -> Config:
         m, lo = self.model, self.loss
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(

@@ -7,7 +7,6 @@ Depth maps here are (H, W) float arrays at the original image size, in the model
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
