@@ -111,6 +111,21 @@ def normalised_to_pixel(K_norm: np.ndarray, height: int, width: int) -> np.ndarr
     return K
 
 
+PIXEL_K_KEYS = {"K": (3, 3), "P_rect_02": (3, 4), "P2": (3, 4)}  # plain K, raw cam_to_cam, odometry calib.txt
+
+
+def read_calib_intrinsics(path: str | Path) -> np.ndarray:
+    """(3, 3) float64 pixel K of the left colour camera from a ``key: values`` file: the first of ``K``
+    (9 numbers), ``P_rect_02`` (KITTI raw calib_cam_to_cam.txt) or ``P2`` (odometry calib.txt)."""
+    path = Path(path)
+    calib = read_calib_file(path)
+    for key, shape in PIXEL_K_KEYS.items():
+        if key in calib:
+            return calib_matrix(calib, key, shape, path)[:, :3].astype(np.float64)
+    raise PoseconsError(f"{path}: no 'K', 'P_rect_02' or 'P2' entry (expected a file with 'K: 9 numbers', "
+                        f"a KITTI calib_cam_to_cam.txt or an odometry calib.txt)")
+
+
 def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
     """Normalised (3, 3) float32 K of rectified camera ``cam`` of a raw date folder."""
     p_rect, (width, height) = raw_projection(date_dir, cam)
