@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import PoseconsError
+from .pointcloud import backproject_pixels
 
 GROUND_ROWS = (0.6, 1.0)  # image rows (fractions of H) searched for the ground plane
 GROUND_COLS = (0.2, 0.8)  # central columns: the road rather than parked cars and walls
@@ -56,8 +57,7 @@ def ground_points(depth: np.ndarray, K: np.ndarray, max_points: int = 20000, see
     if len(z) > max_points:
         pick = np.random.default_rng(seed).choice(len(z), max_points, replace=False)
         u, v, z = u[pick], v[pick], z[pick]
-    rays = np.linalg.inv(K) @ np.stack([u, v, np.ones_like(u)]).astype(np.float64)
-    return (rays * z).T
+    return backproject_pixels(u, v, z, K)
 
 
 def camera_height(depth: np.ndarray, K: np.ndarray) -> float:
