@@ -111,7 +111,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     else:
         disps, pred_name = evaluate.load_pred_disps(args.pred_disps), str(args.pred_disps)
 
-    result = evaluate.depth_evaluation(disps, gts, split, args.scaling, args.gt_kind, pred_name, str(gt_path))
+    result = evaluate.depth_result(disps, gts, split, args.scaling, args.gt_kind, pred_name, str(gt_path))
     result.update(ground_truth=str(args.gt or "exported on the fly"),
                   post_process=bool(args.checkpoint and args.post_process))
     print(compare.markdown_table([result], [Path(pred_name).stem], bold=False), end="")
@@ -145,7 +145,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         if len(estimate) != len(gt):
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
 
-    result = evaluate.pose_evaluation(estimate, gt, args.const_velocity, source, str(args.gt_poses))
+    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses))
     for name, r in (("prediction", result), (f"const. velocity ({args.const_velocity})", result["const_velocity"])):
         print(f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
               f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m")

@@ -51,7 +51,7 @@ def load_pred_disps(path: Path) -> np.ndarray:
         raise PoseconsError(f"{path}: not a readable .npy array ({exc})") from None
 
 
-def depth_evaluation(disps: np.ndarray, gts: Sequence[np.ndarray], lines: Sequence[SplitLine], scaling: str = "frame",
+def depth_result(disps: np.ndarray, gts: Sequence[np.ndarray], lines: Sequence[SplitLine], scaling: str = "frame",
                      gt_kind: str = "lidar", pred_name: str = "predictions", gt_name: str = "ground truth") -> dict:
     """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
     N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
@@ -62,7 +62,7 @@ def depth_evaluation(disps: np.ndarray, gts: Sequence[np.ndarray], lines: Sequen
     return result
 
 
-def pose_evaluation(estimate: np.ndarray, gt: np.ndarray, const_velocity: str = "first",
+def pose_result(estimate: np.ndarray, gt: np.ndarray, const_velocity: str = "first",
                     pred_name: str = "predictions", gt_name: str = "ground truth") -> dict:
     """:func:`~posecons.metrics.pose.evaluate_pose` of (N, 4, 4) camera → world poses, with provenance."""
     result = evaluate_pose(estimate, gt, const_velocity)

@@ -18,7 +18,7 @@ from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import load_config, resolve_preset
 from ..data.gt import export_gt, load_gt
 from ..data.kitti_odometry import list_sequence_frames
-from ..data.splits import read_split
+from ..data.splits import SplitLine, read_split
 from ..data.synth import generate_synth
 from ..data.trajectory_io import read_kitti_poses
 from ..evaluation import evaluate
@@ -32,11 +32,11 @@ from .trainer import train
 SYNTH = {"drives": 6, "frames": 120, "width": 384, "height": 128, "neighbours": 3}
 
 
-def _evaluate_depth(checkpoint: Path, data: Path, split: list, gt: Path, plots: Path | None = None) -> dict:
+def _evaluate_depth(checkpoint: Path, data: Path, split: list[SplitLine], gt: Path, plots: Path | None = None) -> dict:
     """Depth metrics and σ/μ of a checkpoint on the test split."""
     gts, _ = load_gt(gt)
     disps = evaluate.model_disparities(load_predictor(checkpoint), data, split)
-    result = evaluate.depth_evaluation(disps, gts, split, pred_name=str(checkpoint), gt_name=str(gt))
+    result = evaluate.depth_result(disps, gts, split, pred_name=str(checkpoint), gt_name=str(gt))
     if plots is not None:
         evaluate.write_depth_plots(result, split, plots)
     return result
@@ -49,7 +49,7 @@ def _evaluate_pose(checkpoint: Path, odometry: Path, sequence: str, plots: Path)
     steps = evaluate.model_steps(load_predictor(checkpoint), list_sequence_frames(odometry, sequence))
     estimate = global_from_relative(steps)
     evaluate.write_trajectories(plots, estimate, gt)
-    return evaluate.pose_evaluation(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
+    return evaluate.pose_result(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
 
 
 def _read_jsonl(path: Path) -> list[dict]:
