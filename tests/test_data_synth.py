@@ -97,7 +97,8 @@ def test_oxts_and_odometry_poses_reproduce_trajectory(synth: Path) -> None:
     speed = np.hypot(packets[:, 6], packets[:, 7]) / 10  # m/s at 10 Hz → m per frame
     assert 0.4 < speed.mean() < 1.6
     cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])
-    np.testing.assert_allclose(read_kitti_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0, atol=1e-6)
+    np.testing.assert_allclose(read_kitti_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0,
+                               atol=1e-6)
 
 
 def _relative_world(poses: np.ndarray) -> np.ndarray:
