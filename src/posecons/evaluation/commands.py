@@ -75,7 +75,7 @@ def _require(args: argparse.Namespace, *names: str) -> None:
 def _predictor(args: argparse.Namespace):
     from ..inference.backend import load_predictor
 
-    return load_predictor(args.checkpoint, args.device)
+    return load_predictor(args.checkpoint, args.device or "auto")
 
 
 def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str], Path]:

@@ -103,11 +103,12 @@ def _session(path: Path, providers: list[str]):
         raise PoseconsError(f"{path}: not a loadable ONNX model ({str(exc).splitlines()[0]})") from exc
 
 
-def load_predictor(path: str | Path, device: str | None = None) -> Predictor:
+def load_predictor(path: str | Path, device: str = "cpu") -> Predictor:
     """A checkpoint (.pt / .safetensors), an export directory, or its depth.onnx → a :class:`Predictor`
-    on ``device`` (default: cuda if available, else cpu)."""
+    on ``device`` (``"auto"``: cuda if available, else cpu)."""
     path = Path(path)
-    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise PoseconsError(f"--device {device}: CUDA is not available on this machine")
     if path.is_dir():

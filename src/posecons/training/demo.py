@@ -35,7 +35,7 @@ SYNTH = {"drives": 6, "frames": 120, "width": 384, "height": 128, "neighbours": 
 def _evaluate_depth(checkpoint: Path, data: Path, split: list[SplitLine], gt: Path, plots: Path | None = None) -> dict:
     """Depth metrics and σ/μ of a checkpoint on the test split."""
     gts, _ = load_gt(gt)
-    disps = evaluate.model_disparities(load_predictor(checkpoint), data, split)
+    disps = evaluate.model_disparities(load_predictor(checkpoint, "auto"), data, split)
     result = evaluate.depth_result(disps, gts, split, pred_name=str(checkpoint), gt_name=str(gt))
     if plots is not None:
         evaluate.write_depth_plots(result, split, plots)
@@ -46,7 +46,7 @@ def _evaluate_pose(checkpoint: Path, odometry: Path, sequence: str, plots: Path)
     """Snippet ATE, full ATE / RPE and the constant-velocity baseline of a checkpoint on one sequence."""
     gt_file = odometry / "poses" / f"{sequence}.txt"
     gt = read_kitti_poses(gt_file)
-    steps = evaluate.model_steps(load_predictor(checkpoint), list_sequence_frames(odometry, sequence))
+    steps = evaluate.model_steps(load_predictor(checkpoint, "auto"), list_sequence_frames(odometry, sequence))
     estimate = global_from_relative(steps)
     evaluate.write_trajectories(plots, estimate, gt)
     return evaluate.pose_result(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
