@@ -1,7 +1,12 @@
+import re
+from pathlib import Path
+
 import pytest
 
-from posecons.config import load_config
+from posecons.config import load_config, preset_names, resolve_preset
 from posecons.errors import PoseconsError
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_defaults_are_the_paper_setting():
@@ -44,3 +49,29 @@ def test_missing_or_malformed_preset_names_the_file(tmp_path):
     bad.write_text("model: [1, 2\n")
     with pytest.raises(PoseconsError, match="bad.yaml: not valid YAML"):
         load_config(bad)
+
+
+def _readme_presets() -> set[str]:
+    """Preset names the README mentions: ``--config NAME``, ``a/{b,c}``, and ``a/b`` in backticks where
+    ``a`` is a preset folder (other backticked paths, such as ``runs/demo``, are not presets)."""
+    text = (REPO / "README.md").read_text()
+    folders = {name.split("/")[0] for name in preset_names()}
+    names = set(re.findall(r"--config ([\w/]+)", text))
+    names |= {n for n in re.findall(r"`([a-z_]+/[a-z_]+)`", text) if n.split("/")[0] in folders}
+    for folder, members in re.findall(r"`([a-z_]+)/\{([a-z_,]+)\}`", text):
+        names |= {f"{folder}/{m}" for m in members.split(",")}
+    return names
+
+
+def test_every_preset_the_readme_names_resolves_here_and_under_configs():
+    names = _readme_presets()
+    assert {"kitti/cycle", "kitti_odom/all", "synth/demo", "custom/video"} <= names
+    assert names <= set(preset_names())  # all bundled presets the README names exist
+    for name in names:
+        assert load_config(resolve_preset(name)).validate()
+        assert (REPO / "configs" / f"{name}.yaml").resolve() == resolve_preset(name).resolve()
+
+
+def test_unknown_preset_lists_the_bundled_ones():
+    with pytest.raises(PoseconsError, match="kitti/cycle"):
+        resolve_preset("kitti/cycel")

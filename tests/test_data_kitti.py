@@ -11,10 +11,10 @@ import torch
 from posecons.data.calib import raw_intrinsics, read_calib_file, velo_to_image
 from posecons.data.gt import improved_gt_path, lidar_gt, read_improved_gt, velo_to_depth_map
 from posecons.data.io import load_velodyne
-from posecons.data.kitti_odometry import read_poses
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts
 from posecons.data.splits import read_split, read_static_frames, read_test_scenes
+from posecons.data.trajectory_io import read_kitti_poses
 
 DRIVE = "2011_09_26/2011_09_26_drive_0002_sync"
 
@@ -59,7 +59,7 @@ def test_real_calibration(kitti_dir: Path) -> None:
 
 
 def test_real_odometry_poses(kitti_dir: Path) -> None:
-    poses = read_poses(kitti_dir / "odometry" / "poses" / "09.txt")
+    poses = read_kitti_poses(kitti_dir / "odometry" / "poses" / "09.txt")
     assert poses.shape == (1591, 4, 4)
     rot = poses[:, :3, :3]
     np.testing.assert_allclose(rot @ rot.transpose(0, 2, 1), np.broadcast_to(np.eye(3), rot.shape), atol=1e-5)

@@ -13,13 +13,14 @@ from posecons.cli import main
 from posecons.data.calib import raw_intrinsics, velo_to_image
 from posecons.data.gt import load_gt
 from posecons.data.io import load_velodyne
-from posecons.data.kitti_odometry import KittiOdometryDataset, list_sequence_frames, read_poses
+from posecons.data.kitti_odometry import KittiOdometryDataset, list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts
 from posecons.data.splits import build_split, read_split
 from posecons.data.synth import drive_folder, make_drive
 from posecons.data.synth.render import camera_depth_at
 from posecons.data.synth.rig import Rig
+from posecons.data.trajectory_io import read_kitti_poses
 
 W, H, FRAMES, SEED = 312, 96, 12, 3
 
@@ -96,7 +97,8 @@ def test_oxts_and_odometry_poses_reproduce_trajectory(synth: Path) -> None:
     speed = np.hypot(packets[:, 6], packets[:, 7]) / 10  # m/s at 10 Hz → m per frame
     assert 0.4 < speed.mean() < 1.6
     cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])
-    np.testing.assert_allclose(read_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0, atol=1e-6)
+    np.testing.assert_allclose(read_kitti_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0,
+                               atol=1e-6)
 
 
 def _relative_world(poses: np.ndarray) -> np.ndarray:
@@ -158,7 +160,8 @@ def test_training_frames_are_decoded_and_resized_as_evaluation_does(tmp_path: Pa
     # A JPEG at KITTI size read at a quarter of it: JPEG draft (DCT) decoding would differ here.
     from PIL import Image
 
-    from posecons.evaluation.predict import load_image
+    from posecons.inference.backend import Predictor, predict_batches
+    from posecons.inference.io import frames_from_paths
 
     rng = np.random.default_rng(0)
     drive = tmp_path / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"
@@ -170,4 +173,7 @@ def test_training_frames_are_decoded_and_resized_as_evaluation_does(tmp_path: Pa
     (tmp_path / "2011_09_26" / "calib_cam_to_cam.txt").write_text((calib / "calib_cam_to_cam.txt").read_text())
     split = ["2011_09_26/2011_09_26_drive_0001_sync 1 l"]
     sample = KittiRawDataset(tmp_path, split, 96, 320, img_ext=".jpg", train=False)[0]
-    assert torch.equal(sample["frames"][0], load_image(drive / "0000000001.jpg", 96, 320))
+    predictor = Predictor()  # the prediction path only needs the network size here
+    predictor.height, predictor.width = 96, 320
+    (_, images, _), = predict_batches(predictor, frames_from_paths([drive / "0000000001.jpg"]), 1, depth=False)
+    assert torch.equal(sample["frames"][0], torch.from_numpy(images[0]))

@@ -1,5 +1,5 @@
-"""The demo pipeline end to end at toy size: every stage runs through the real commands and the
-report, plots and summary come out (learning itself is asserted in test_training's overfit)."""
+"""The demo pipeline end to end at toy size: every stage runs through the library functions the
+commands call, and the report, plots and summary come out (learning itself is asserted in test_training's overfit)."""
 
 import json
 
@@ -12,14 +12,16 @@ pytestmark = pytest.mark.slow
 
 def test_demo_writes_report_summary_and_plots(tmp_path):
     out = tmp_path / "demo"
-    summary = run_demo(out, synth_args=["--drives", "2", "--frames", "14", "--width", "192", "--height", "64",
-                                        "--neighbours", "3"],
+    summary = run_demo(out, synth={"drives": 2, "frames": 14, "width": 192, "height": 64, "neighbours": 3},
                        overrides=["train.max_steps=3", "train.val_every=3", "train.batch_size=2", "train.val_samples=4"])
     saved = json.loads((out / "summary.json").read_text())
     for key in ("abs_rel", "abs_rel_untrained", "scale_cv", "ate_mean", "minutes"):
         assert key in saved and saved[key] == summary[key] and saved[key] >= 0
     report = (out / "report.md").read_text()
     assert "| untrained |" in report and "| trained (cyc) |" in report and "constant velocity" in report
+    # The demo preset selects best.pt by ground truth on purpose, and the report says so.
+    assert saved["checkpoint"]["selected_by"] == "lowest validation abs_rel (ground truth)"
+    assert "best.pt, step 3; selected by: lowest validation abs_rel (ground truth)" in report
     for plot in ("validation.png", "scale_boxplot.png", "scale_over_time.png", "abs_rel_histogram.png",
                  "trajectory.png"):
         assert (out / "plots" / plot).stat().st_size > 1000

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from posecons.cli import main
-from posecons.evaluation.trajectory_io import read_kitti_poses, read_tum, write_kitti_poses
+from posecons.data.trajectory_io import read_kitti_poses, read_tum, write_kitti_poses
 
 DRIVE = "2011_09_26/2011_09_26_drive_0002_sync"
 DEPTH_KEYS = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3", "scaling", "scales", "scale_cv",

@@ -16,13 +16,14 @@ from PIL import Image
 from posecons.checkpoint import load_model, save_checkpoint
 from posecons.cli import main
 from posecons.config import load_config
+from posecons.data.calib import read_calib_intrinsics
+from posecons.data.io import resize_rgb
 from posecons.data.synth import drive_folder, generate_synth
-from posecons.evaluation.trajectory_io import read_kitti_poses, read_tum
+from posecons.data.trajectory_io import read_kitti_poses, read_tum
 from posecons.geometry import backproject
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor
-from posecons.inference.camera import read_calib_intrinsics, resolve_intrinsics
-from posecons.data.io import resize_rgb
+from posecons.inference.camera import resolve_intrinsics
 from posecons.inference.io import FrameSource
 from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
 from posecons.inference.scale import camera_height
@@ -128,7 +129,7 @@ def test_predict_folder_writes_every_frame_at_original_size(base_run):
 def test_trajectory_chains_the_pose_net_steps(ckpt, frames_dir, base_run):
     """G_{i+1} = G_i · inv(T_{i+1←i}) with T from the pair (I_i, I_{i+1})."""
     predictor = load_predictor(ckpt)
-    
+
     images = np.stack([resize_rgb(f.image, 64, 96) for f in FrameSource(frames_dir)])
     steps = predictor.pose(images[:-1], images[1:])
     poses = read_kitti_poses(base_run / "trajectory_kitti.txt")

@@ -182,7 +182,8 @@ def test_rotating_trajectory_gives_true_poses_and_zero_constraints():
 def test_predict_pose_and_pose_evaluation_share_the_training_pair_order(tmp_path):
     from PIL import Image
 
-    from posecons.evaluation.predict import predict_steps
+    from posecons.evaluation.evaluate import model_steps
+    from posecons.inference.backend import TorchPredictor
 
     ids = list(range(5))
     frames = torch.rand(1, len(ids), 3, H, W)
@@ -196,6 +197,6 @@ def test_predict_pose_and_pose_evaluation_share_the_training_pair_order(tmp_path
     for i in ids:
         paths.append(tmp_path / f"{i:06d}.png")
         Image.fromarray((frames[0, i].permute(1, 2, 0).numpy() * 255).round().astype("uint8")).save(paths[-1])
-    steps = predict_steps(model, paths, H, W, batch_size=2)
+    steps = model_steps(TorchPredictor(model, "fake"), paths, batch_size=2)  # evaluate-pose's path
     assert steps.shape == (4, 4, 4)
     assert torch.allclose(torch.from_numpy(steps), true_steps, atol=1e-5)

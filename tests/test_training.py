@@ -14,8 +14,7 @@ import torch
 
 from posecons.checkpoint import load_checkpoint
 from posecons.cli import main as cli
-from posecons.config import load_config
-from posecons.training.commands import resolve_preset
+from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
 from posecons.training.trainer import Trainer, train
 
@@ -189,8 +188,7 @@ def test_killed_run_resumes_to_identical_weights(synth_data, tmp_path):
 
 DDP_SCRIPT = """
 import sys, torch, torch.distributed as dist
-from posecons.config import load_config
-from posecons.training.commands import resolve_preset
+from posecons.config import load_config, resolve_preset
 from posecons.training.trainer import Trainer
 cfg = load_config(overrides=sys.argv[3:])
 trainer = Trainer(cfg, sys.argv[1], sys.argv[2], accelerator="cpu", quiet=True)

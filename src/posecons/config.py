@@ -19,6 +19,7 @@ import yaml
 from .errors import PoseconsError
 
 CONSTRAINTS = ("fb", "id", "cyc")
+PRESETS = Path(__file__).resolve().parent / "configs"  # bundled presets; the repository's configs/ links here
 
 
 @dataclass
@@ -91,7 +92,7 @@ class Config:
     data: DataConfig = field(default_factory=DataConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
 
-    def validate(self) -> "Config":
+    def validate(self) -> Config:
         m, lo = self.model, self.loss
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(
@@ -185,6 +186,23 @@ def _read_preset(path: Path, seen: tuple[Path, ...] = ()) -> list[dict[str, Any]
     base = data.pop("base", None)
     layers = _read_preset(path.parent / base, seen + (path,)) if base else []
     return layers + [data]
+
+
+def resolve_preset(name: str | Path) -> Path:
+    """A preset file path, or a bundled preset name such as ``kitti/cycle``."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    name = str(name)
+    bundled = PRESETS / (name if name.endswith(".yaml") else f"{name}.yaml")
+    if bundled.is_file():
+        return bundled
+    raise PoseconsError(f"config {name!r} is neither a file nor a bundled preset ({', '.join(preset_names())})")
+
+
+def preset_names() -> list[str]:
+    """Names of the bundled presets, e.g. ``kitti/cycle``."""
+    return sorted(str(p.relative_to(PRESETS).with_suffix("")) for p in PRESETS.rglob("*.yaml"))
 
 
 def parse_override(item: str) -> dict[str, Any]:

@@ -90,18 +90,46 @@ def raw_projection(date_dir: Path, cam: int = 2) -> tuple[np.ndarray, tuple[int,
     return p_rect, (int(round(width)), int(round(height)))
 
 
-def normalised_k(p_rect: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(3, 3) float32 intrinsics normalised by image size (row 0 / W, row 1 / H)."""
-    k = np.array(p_rect[:3, :3], dtype=np.float64)
-    k[0] /= width
-    k[1] /= height
-    return k.astype(np.float32)
+def pixel_to_normalised(K: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(3, 3) float64 K normalised by image size (row 0 / W, row 1 / H) from the pixel K of an image of
+    height × width (the first three columns of a projection matrix are such a K).
+
+    Arguments in (height, width) order, as torch and :func:`posecons.geometry.scale_intrinsics`.
+    """
+    K = np.array(K[:3, :3], dtype=np.float64)
+    K[0] /= width
+    K[1] /= height
+    return K
+
+
+def normalised_to_pixel(K_norm: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(3, 3) normalised K → float64 pixel K of an image of height × width (numpy twin of
+    :func:`posecons.geometry.scale_intrinsics`)."""
+    K = np.array(K_norm, dtype=np.float64)
+    K[0] *= width
+    K[1] *= height
+    return K
+
+
+PIXEL_K_KEYS = {"K": (3, 3), "P_rect_02": (3, 4), "P2": (3, 4)}  # plain K, raw cam_to_cam, odometry calib.txt
+
+
+def read_calib_intrinsics(path: str | Path) -> np.ndarray:
+    """(3, 3) float64 pixel K of the left colour camera from a ``key: values`` file: the first of ``K``
+    (9 numbers), ``P_rect_02`` (KITTI raw calib_cam_to_cam.txt) or ``P2`` (odometry calib.txt)."""
+    path = Path(path)
+    calib = read_calib_file(path)
+    for key, shape in PIXEL_K_KEYS.items():
+        if key in calib:
+            return calib_matrix(calib, key, shape, path)[:, :3].astype(np.float64)
+    raise PoseconsError(f"{path}: no 'K', 'P_rect_02' or 'P2' entry (expected a file with 'K: 9 numbers', "
+                        f"a KITTI calib_cam_to_cam.txt or an odometry calib.txt)")
 
 
 def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
-    """Normalised (3, 3) K of rectified camera ``cam`` of a raw date folder."""
+    """Normalised (3, 3) float32 K of rectified camera ``cam`` of a raw date folder."""
     p_rect, (width, height) = raw_projection(date_dir, cam)
-    return normalised_k(p_rect, width, height)
+    return pixel_to_normalised(p_rect, height, width).astype(np.float32)
 
 
 def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:

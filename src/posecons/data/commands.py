@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PoseconsError
+from .calib import read_calib_intrinsics
 from .gt import export_gt
-from .prepare import prepare, read_intrinsics_file
+from .prepare import prepare
 from .splits import build_split, read_static_frames, read_test_scenes, write_split
 from .synth import generate_synth
 
@@ -81,7 +82,7 @@ def _prepare(args: argparse.Namespace) -> int:
     if args.calib is not None:
         if any(v is not None for v in given):
             raise PoseconsError("give either --fx --fy --cx --cy or --calib, not both")
-        k = read_intrinsics_file(args.calib)
+        k = read_calib_intrinsics(args.calib)
     elif all(v is not None for v in given):
         fx, fy, cx, cy = given
         k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])

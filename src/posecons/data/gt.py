@@ -16,8 +16,7 @@ from PIL import Image
 from ..errors import PoseconsError
 from .calib import raw_projection, velo_to_image
 from .io import atomic_file, load_velodyne, require_file
-from .splits import SIDE_TO_CAMERA as CAMERA
-from .splits import SplitSource, read_split
+from .splits import SIDE_TO_CAMERA, SplitSource, read_split
 
 DepthKind = Literal["velo_x", "camera_z"]
 
@@ -64,16 +63,16 @@ def read_improved_gt(path: Path) -> np.ndarray:
 def lidar_gt(data_path: Path, folder: str, frame: int, side: str = "l", depth: DepthKind = "velo_x") -> np.ndarray:
     """Depth map of one raw frame from its Velodyne scan and its date's calibration."""
     date_dir = Path(data_path) / folder.split("/")[0]
-    _, (width, height) = raw_projection(date_dir, CAMERA[side])
+    _, (width, height) = raw_projection(date_dir, SIDE_TO_CAMERA[side])
     scan = load_velodyne(Path(data_path) / folder / "velodyne_points" / "data" / f"{frame:010d}.bin")
-    return velo_to_depth_map(scan, velo_to_image(date_dir, CAMERA[side]), width, height, depth)
+    return velo_to_depth_map(scan, velo_to_image(date_dir, SIDE_TO_CAMERA[side]), width, height, depth)
 
 
 def improved_gt_path(data_path: Path, folder: str, frame: int, side: str = "l", root: Optional[Path] = None) -> Path:
     """``<data_path>/<folder>/proj_depth/…`` or, with ``root`` (KITTI's depth_annotated layout),
     ``<root>/<drive>/proj_depth/groundtruth/image_0k/<frame:010d>.png``."""
     base = Path(data_path) / folder if root is None else Path(root) / Path(folder).name
-    return base / "proj_depth" / "groundtruth" / f"image_0{CAMERA[side]}" / f"{frame:010d}.png"
+    return base / "proj_depth" / "groundtruth" / f"image_0{SIDE_TO_CAMERA[side]}" / f"{frame:010d}.png"
 
 
 def export_gt(
@@ -108,3 +107,29 @@ def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
     except (OSError, KeyError, ValueError) as exc:
         raise PoseconsError(f"{path}: not a posecons ground-truth file ({exc})") from exc
     return maps, lines
+
+
+class GroundTruth:
+    """Per-frame depth ground truth (metres, 0 = invalid): a folder of 16-bit KITTI-style PNGs
+    (value / 256) named like the input frames, or an export-gt NPZ (keys 000000, 000001, … by
+    frame index, plus ``lines``)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.npz = None
+        if self.path.is_file() and self.path.suffix == ".npz":
+            try:
+                self.npz = np.load(self.path, allow_pickle=False)
+                self.keys = set(self.npz.files)
+            except (OSError, ValueError) as exc:
+                raise PoseconsError(f"{self.path}: not a readable ground-truth NPZ ({exc})") from exc
+        elif not self.path.is_dir():
+            raise PoseconsError(f"{self.path}: ground truth must be a folder of 16-bit PNGs or an .npz file")
+
+    def get(self, name: str, index: int) -> np.ndarray | None:
+        """(H, W) float32 depth of the frame called ``name`` at ``index``, or None if there is none."""
+        if self.npz is not None:
+            key = f"{index:06d}"
+            return self.npz[key].astype(np.float32) if key in self.keys else None
+        png = self.path / f"{name}.png"
+        return read_improved_gt(png) if png.is_file() else None

@@ -1,4 +1,5 @@
-"""KITTI odometry: ``sequences/NN/{calib.txt,times.txt,image_2,image_3}`` and ``poses/NN.txt``."""
+"""KITTI odometry: ``sequences/NN/{calib.txt,image_2,image_3}``; the ``poses/NN.txt`` and ``times.txt``
+files are read by :mod:`.trajectory_io`."""
 
 from __future__ import annotations
 
@@ -8,11 +9,10 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-from .calib import calib_matrix, normalised_k, read_calib_file
+from .calib import calib_matrix, pixel_to_normalised, read_calib_file
 from .frames import FrameDataset
 from .io import require_file
-from .splits import SIDE_TO_CAMERA as CAMERA
-from .splits import SplitLine
+from .splits import SIDE_TO_CAMERA, SplitLine
 
 
 def sequence_dir(data_path: Path, sequence: int | str) -> Path:
@@ -26,33 +26,9 @@ def read_odometry_projection(calib_path: Path, cam: int = 2) -> np.ndarray:
     return calib_matrix(read_calib_file(calib_path), f"P{cam}", (3, 4), calib_path)
 
 
-def read_poses(path: Path) -> np.ndarray:
-    """``poses/NN.txt`` → (N, 4, 4) float64 camera-0 → world poses (12 numbers a line, row-major 3×4)."""
-    path = require_file(Path(path), "pose file")
-    rows = []
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            values = [float(v) for v in line.split()]
-        except ValueError:
-            values = []
-        if len(values) != 12:
-            raise PoseconsError(f"{path}:{number}: expected 12 numbers, got {line.strip()[:60]!r}")
-        rows.append(values)
-    poses = np.tile(np.eye(4), (len(rows), 1, 1))
-    poses[:, :3, :] = np.asarray(rows).reshape(-1, 3, 4)
-    return poses
-
-
-def write_poses(path: Path, poses: np.ndarray) -> None:
-    """Write (N, 4, 4) poses in the KITTI format (first 3 rows, row-major, 12 numbers a line)."""
-    np.savetxt(path, np.asarray(poses)[:, :3, :].reshape(-1, 12), fmt="%.9e")
-
-
 def list_sequence_frames(data_path: Path, sequence: int | str, side: str = "l", img_ext: str = ".png") -> list[Path]:
     """Sorted image paths of one sequence's camera 2 (``l``) or 3 (``r``), for evaluation."""
-    folder = sequence_dir(data_path, sequence) / f"image_{CAMERA[side]}"
+    folder = sequence_dir(data_path, sequence) / f"image_{SIDE_TO_CAMERA[side]}"
     frames = sorted(p for p in folder.glob(f"*{img_ext}") if p.stem.isdigit())
     if not frames:
         raise PoseconsError(f"{folder}: no *{img_ext} frames found")
@@ -66,7 +42,7 @@ class KittiOdometryDataset(FrameDataset):
     """
 
     def image_path(self, line: SplitLine, frame: int) -> Path:
-        folder = sequence_dir(self.data_path, line.folder) / f"image_{CAMERA[line.side]}"
+        folder = sequence_dir(self.data_path, line.folder) / f"image_{SIDE_TO_CAMERA[line.side]}"
         return folder / f"{frame:06d}{self.img_ext}"
 
     def calib_k(self, line: SplitLine) -> np.ndarray:
@@ -76,7 +52,8 @@ class KittiOdometryDataset(FrameDataset):
             with Image.open(image) as img:
                 width, height = img.size
             calib = sequence_dir(self.data_path, line.folder) / "calib.txt"
-            self._k_cache[key] = normalised_k(read_odometry_projection(calib, CAMERA[line.side]), width, height)
+            P = read_odometry_projection(calib, SIDE_TO_CAMERA[line.side])
+            self._k_cache[key] = pixel_to_normalised(P, height, width).astype(np.float32)
         return self._k_cache[key]
 
     def __init__(self, *args, **kwargs) -> None:

@@ -7,10 +7,29 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import PoseconsError
 from .calib import raw_intrinsics
 from .frames import FrameDataset
-from .splits import SIDE_TO_CAMERA as CAMERA
-from .splits import SplitLine
+from .splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
+
+IMAGE_EXTENSIONS = (".png", ".jpg")  # what split_image_paths looks for: KITTI's PNGs or a JPEG copy
+
+
+def raw_image_path(data_path: Path, line: SplitLine, frame: int, ext: str) -> Path:
+    """``D/<folder>/image_0{2,3}/data/<frame:010d><ext>``: camera 2 for side l, 3 for r."""
+    return Path(data_path) / line.folder / f"image_0{SIDE_TO_CAMERA[line.side]}" / "data" / f"{frame:010d}{ext}"
+
+
+def split_image_paths(data_path: str | Path, split: SplitSource) -> list[Path]:
+    """The existing image (.png, else .jpg) of each split line's own frame, for evaluation."""
+    paths = []
+    for line in read_split(split):
+        candidates = [raw_image_path(data_path, line, line.frame, ext) for ext in IMAGE_EXTENSIONS]
+        found = next((p for p in candidates if p.is_file()), None)
+        if found is None:
+            raise PoseconsError(f"{candidates[0].with_suffix('')}.png / .jpg: image not found")
+        paths.append(found)
+    return paths
 
 
 class KittiRawDataset(FrameDataset):
@@ -22,9 +41,8 @@ class KittiRawDataset(FrameDataset):
     """
 
     def image_path(self, line: SplitLine, frame: int) -> Path:
-        cam = CAMERA[line.side]
-        return self.data_path / line.folder / f"image_0{cam}" / "data" / f"{frame:010d}{self.img_ext}"
+        return raw_image_path(self.data_path, line, frame, self.img_ext)
 
     def calib_k(self, line: SplitLine) -> np.ndarray:
         date = line.folder.split("/")[0]
-        return raw_intrinsics(self.data_path / date, CAMERA[line.side])
+        return raw_intrinsics(self.data_path / date, SIDE_TO_CAMERA[line.side])

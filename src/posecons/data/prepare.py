@@ -19,23 +19,12 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-from .calib import calib_matrix, format_calib, read_calib_file
+from .calib import format_calib
 from .io import atomic_dir, load_rgb
 from .splits import SplitLine, write_split
 
 DATE = "custom"
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp"}
-
-
-def read_intrinsics_file(path: Path) -> np.ndarray:
-    """(3, 3) pixel K from a ``key: values`` file with ``K`` (9 numbers), ``P_rect_02`` or ``P2`` (12)."""
-    calib = read_calib_file(Path(path))
-    if "K" in calib:
-        return calib_matrix(calib, "K", (3, 3), Path(path))
-    for key in ("P_rect_02", "P2"):
-        if key in calib:
-            return calib_matrix(calib, key, (3, 4), Path(path))[:, :3]
-    raise PoseconsError(f"{path}: no 'K', 'P_rect_02' or 'P2' entry")
 
 
 def iter_frames(source: Path) -> Iterator[Image.Image]:

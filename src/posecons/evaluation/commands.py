@@ -1,18 +1,18 @@
-"""Sub-commands ``evaluate-depth``, ``evaluate-pose`` and ``compare``: thin wrappers that read
-files, call the library functions of this package and write JSON / plots / trajectories."""
+"""Sub-commands ``evaluate-depth``, ``evaluate-pose`` and ``compare``: argument checks and printing
+over :mod:`.evaluate` and :mod:`.compare`."""
 
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ..data import trajectory_io
 from ..errors import PoseconsError
-from . import compare, depth, plots, pose, trajectory_io
+from ..metrics import depth, pose
+from . import compare, evaluate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -72,40 +72,10 @@ def _require(args: argparse.Namespace, *names: str) -> None:
         raise PoseconsError(f"--checkpoint needs {' and '.join(missing)}")
 
 
-def _load_model(args: argparse.Namespace):
-    """(model, config, device) from --checkpoint on --device."""
-    import torch
+def _predictor(args: argparse.Namespace):
+    from ..inference.backend import load_predictor
 
-    from ..checkpoint import load_model
-
-    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    model, config = load_model(args.checkpoint, map_location=device)
-    return model, config, device
-
-
-def write_json(path: Path, result: dict) -> None:
-    """JSON with NaN written as null (strict JSON readers reject NaN)."""
-    def clean(value):
-        if isinstance(value, float) and not math.isfinite(value):
-            return None
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [clean(v) for v in value]
-        return value
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(clean(result), indent=2) + "\n")
-
-
-def load_pred_disps(path: Path) -> np.ndarray:
-    """Disparities from a ``.npy`` file (no pickles)."""
-    if not path.is_file():
-        raise PoseconsError(f"{path}: predictions file not found")
-    try:
-        return np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise PoseconsError(f"{path}: not a readable .npy array ({exc})") from None
+    return load_predictor(args.checkpoint, args.device or "auto")
 
 
 def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str], Path]:
@@ -121,6 +91,7 @@ def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray]
 
 
 def evaluate_depth_command(args: argparse.Namespace) -> int:
+    from ..checkpoint import describe_checkpoint
     from ..data.splits import read_split
 
     if args.checkpoint is None and args.gt is None:
@@ -130,45 +101,34 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         gts, gt_lines, gt_path = _ground_truth(args, Path(tmp))
     split = read_split(args.split_file if args.split_file else gt_lines)
-    if args.checkpoint is not None:
-        from .predict import predict_disparities, split_image_paths
-
-        model, config, device = _load_model(args)
-        disps = predict_disparities(model, split_image_paths(args.data_path, split), config.model.height,
-                                    config.model.width, args.batch_size, args.post_process, device)
-        pred_name = str(args.checkpoint)
-        if args.save_disps:
-            np.save(args.save_disps, disps)
-    else:
-        disps, pred_name = load_pred_disps(args.pred_disps), str(args.pred_disps)
     if len(split) != len(gts):
         raise PoseconsError(f"{args.split_file} has {len(split)} lines but {gt_path} has {len(gts)} frames")
     for line, stored in zip(split, read_split(gt_lines)):  # the same frames in the same order, not just as many
         if str(line) != str(stored):
             raise PoseconsError(f"{line.where}: '{line}' does not match line '{stored}' that {gt_path} was "
                                 "exported for; pass the split file the ground truth was exported from")
-
-    result = depth.evaluate_depth(disps, gts, [s.folder for s in split], scaling=args.scaling,
-                                  crop=depth.CROP_FOR_GT_KIND[args.gt_kind], pred_name=pred_name,
-                                  gt_name=str(gt_path))
     if args.checkpoint is not None:
-        from ..checkpoint import describe_checkpoint
+        disps = evaluate.model_disparities(_predictor(args), args.data_path, split, args.batch_size,
+                                           args.post_process)
+        pred_name = str(args.checkpoint)
+        if args.save_disps:
+            np.save(args.save_disps, disps)
+    else:
+        disps, pred_name = evaluate.load_pred_disps(args.pred_disps), str(args.pred_disps)
 
+    result = evaluate.depth_result(disps, gts, split, args.scaling, args.gt_kind, pred_name, str(gt_path))
+    if args.checkpoint is not None:
         result.update(checkpoint=describe_checkpoint(args.checkpoint))
-    result.update(gt_kind=args.gt_kind, predictions=pred_name, ground_truth=str(args.gt or "exported on the fly"),
-                  post_process=bool(args.checkpoint and args.post_process),
-                  skipped_lines=[str(split[i]) for i in result["skipped"]])
+    result.update(ground_truth=str(args.gt or "exported on the fly"),
+                  post_process=bool(args.checkpoint and args.post_process))
     print(compare.markdown_table([result], [Path(pred_name).stem], bold=False), end="")
     print(f"{result['n_frames']} frames, scaling {result['scaling']}, {result['n_skipped']} skipped (no valid GT); "
           f"scales: median {result['scale_median']:.3f}, std/median {result['scale_std_over_median']:.3f}, "
           f"σ/μ pooled {result['scale_cv_pooled']:.3f}")
     if args.json:
-        write_json(args.json, result)
+        evaluate.write_json(args.json, result)
     if args.plots:
-        seqs, frames = [s.folder for s in split], [s.frame for s in split]
-        plots.plot_scale_boxplot(result["scales"], seqs, args.plots / "scale_boxplot.png")
-        plots.plot_scale_over_time(result["scales"], seqs, frames, args.plots / "scale_over_time.png")
-        plots.plot_error_histogram(result["per_frame_abs_rel"], args.plots / "abs_rel_histogram.png")
+        evaluate.write_depth_plots(result, split, args.plots)
     return 0
 
 
@@ -178,19 +138,16 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
     if times is not None and len(times) != len(gt):
         raise PoseconsError(f"{args.times} has {len(times)} timestamps but {args.gt_poses} has {len(gt)} poses")
     if args.checkpoint is not None:
+        from ..checkpoint import describe_checkpoint
         from ..data.kitti_odometry import list_sequence_frames
-        from .predict import predict_steps
 
         _require(args, "data_path", "sequence")
         paths = list_sequence_frames(args.data_path, args.sequence)
         if len(paths) != len(gt):
             raise PoseconsError(f"{len(paths)} images in sequence {args.sequence} but "
                                 f"{len(gt)} poses in {args.gt_poses}")
-        model, config, device = _load_model(args)
-        steps = predict_steps(model, paths, config.model.height, config.model.width, args.batch_size, device)
+        steps = evaluate.model_steps(_predictor(args), paths, args.batch_size)
         estimate, source = pose.global_from_relative(steps), str(args.checkpoint)
-        from ..checkpoint import describe_checkpoint
-
         checkpoint = describe_checkpoint(args.checkpoint)
     else:
         estimate, source = trajectory_io.read_kitti_poses(args.pred_poses), str(args.pred_poses)
@@ -198,8 +155,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
         checkpoint = None
 
-    result = pose.evaluate_pose(estimate, gt, args.const_velocity)
-    result.update(predictions=source, ground_truth=str(args.gt_poses))
+    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses))
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")
@@ -207,14 +163,9 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         print(f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
               f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m")
     if args.json:
-        write_json(args.json, result)
+        evaluate.write_json(args.json, result)
     if args.out_dir:
-        args.out_dir.mkdir(parents=True, exist_ok=True)
-        trajectory_io.write_kitti_poses(args.out_dir / "trajectory_kitti.txt", estimate)
-        trajectory_io.write_tum(args.out_dir / "trajectory_tum.txt", estimate, times)
-        trajectory_io.write_tum(args.out_dir / "gt_tum.txt", gt, times)
-        aligned, _ = pose.align_trajectory(estimate, gt)
-        plots.plot_trajectory_topview(gt, aligned, args.out_dir / "trajectory.png", "prediction (Sim(3)-aligned)")
+        evaluate.write_trajectories(args.out_dir, estimate, gt, times)
     return 0
 
 

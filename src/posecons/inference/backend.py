@@ -1,5 +1,7 @@
-"""Run the networks from a checkpoint (PyTorch) or from an export directory (ONNX Runtime) behind
-one interface: network-size images in, scaled disparity and relative poses out.
+"""The one prediction path: the networks of a checkpoint (PyTorch) or of an export directory (ONNX
+Runtime) behind one interface (network-size images in, scaled disparity and relative poses out), and
+:func:`predict_batches` / :class:`StepChain`, which turn decoded frames into those predictions with one
+resizing, batching and device handling for ``predict``, ``evaluate-depth`` and ``evaluate-pose``.
 
 Neither path unpickles arbitrary objects: checkpoints go through ``load_model``
 (``torch.load(weights_only=True)`` or safetensors), ONNX files are protobuf.
@@ -8,13 +10,16 @@ Neither path unpickles arbitrary objects: checkpoints go through ``load_model``
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from ..checkpoint import load_model
+from ..data.io import resize_rgb
 from ..errors import PoseconsError
+from .io import Frame
 
 EXPORT_INFO = "export.json"
 DEPTH_ONNX = "depth.onnx"
@@ -39,10 +44,11 @@ class Predictor:
 
 
 class TorchPredictor(Predictor):
-    def __init__(self, path: Path, device: str = "cpu"):
+    """A :class:`~posecons.model.PoseConsModel` (in eval mode) on ``device``; ``name`` for reports."""
+
+    def __init__(self, model, name: str, device: str = "cpu"):
         self.device = torch.device(device)
-        self.model, self.config = load_model(path, map_location=self.device)
-        self.name = str(path)
+        self.model, self.config, self.name = model, model.config, name
         self.height, self.width = self.config.model.height, self.config.model.width
         self.has_pose = True
 
@@ -99,12 +105,77 @@ def _session(path: Path, providers: list[str]):
 
 
 def load_predictor(path: str | Path, device: str = "cpu") -> Predictor:
-    """A checkpoint (.pt / .safetensors), an export directory, or its depth.onnx → a :class:`Predictor`."""
+    """A checkpoint (.pt / .safetensors), an export directory, or its depth.onnx → a :class:`Predictor`
+    on ``device`` (``"auto"``: cuda if available, else cpu)."""
     path = Path(path)
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
     if device.startswith("cuda") and not torch.cuda.is_available():
         raise PoseconsError(f"--device {device}: CUDA is not available on this machine")
     if path.is_dir():
         return OnnxPredictor(path, device)
     if path.suffix == ".onnx":
         return OnnxPredictor(path.parent, device)
-    return TorchPredictor(path, device)
+    return TorchPredictor(load_model(path, map_location=device)[0], str(path), device)
+
+
+def post_process_disparity(disp: torch.Tensor, disp_flipped: torch.Tensor) -> torch.Tensor:
+    """Blend (B, 1, H, W) disparities of an image and of its mirror (already flipped back).
+
+    The middle is their mean; near each side border the prediction that did not see that
+    border at the image edge takes over (a ramp over 5–10 % of the width), as Monodepth does.
+    """
+    x = torch.linspace(0, 1, disp.shape[-1], device=disp.device)
+    left = 1.0 - torch.clamp(20.0 * (x - 0.05), 0.0, 1.0)  # 1 at the left border, 0 beyond 10 %
+    right = left.flip(0)
+    return left * disp_flipped + right * disp + (1.0 - left - right) * 0.5 * (disp + disp_flipped)
+
+
+def predict_batches(predictor: Predictor, frames: Iterable[Frame], batch_size: int, depth: bool = True,
+                    post_process: bool = False) -> Iterator[tuple[list[Frame], np.ndarray, torch.Tensor | None]]:
+    """Per batch of up to ``batch_size`` frames: (frames, network images (B, 3, h, w) float32 in [0, 1],
+    scaled disparities (B, 1, h, w), or None with ``depth=False``).
+
+    Frames stream through, so a whole sequence never sits in memory. Images are resized to the
+    network size like the training data (:func:`~posecons.data.io.resize_rgb`); ``post_process``
+    also runs the mirrored images and blends (:func:`post_process_disparity`).
+    """
+    batch: list[Frame] = []
+    for frame in frames:
+        batch.append(frame)
+        if len(batch) == batch_size:
+            yield _predict(predictor, batch, depth, post_process)
+            batch = []
+    if batch:
+        yield _predict(predictor, batch, depth, post_process)
+
+
+def _predict(predictor: Predictor, frames: list[Frame], depth: bool, post_process: bool):
+    images = np.stack([resize_rgb(f.image, predictor.height, predictor.width) for f in frames])
+    if not depth:
+        return frames, images, None
+    if not post_process:
+        return frames, images, predictor.disparity(images)
+    disp = predictor.disparity(np.concatenate([images, images[..., ::-1]]))
+    return frames, images, post_process_disparity(disp[: len(images)], disp[len(images) :].flip(-1))
+
+
+class StepChain:
+    """Relative poses T_{i+1←i} of consecutive frames that arrive in batches: the last frame of a
+    batch is paired with the first frame of the next."""
+
+    def __init__(self, predictor: Predictor):
+        self.predictor = predictor
+        self.previous: np.ndarray | None = None
+        self.parts: list[np.ndarray] = []
+
+    def add(self, images: np.ndarray) -> None:
+        """The next (B, 3, h, w) network images of the sequence."""
+        a = images[:-1] if self.previous is None else np.concatenate([self.previous, images[:-1]])
+        if len(a):
+            self.parts.append(self.predictor.pose(a, images[len(images) - len(a) :]))
+        self.previous = images[-1:]
+
+    def steps(self) -> np.ndarray:
+        """(N−1, 4, 4) float64 steps of the N frames added so far."""
+        return np.concatenate(self.parts) if self.parts else np.zeros((0, 4, 4))

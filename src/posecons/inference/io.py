@@ -11,7 +11,7 @@ import contextlib
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -44,6 +44,12 @@ class Frame:
     def size(self) -> tuple[int, int]:
         """(height, width) of the original frame."""
         return self.image.shape[0], self.image.shape[1]
+
+
+def frames_from_paths(paths: Iterable[Path], fps: float = DEFAULT_FPS) -> Iterator[Frame]:
+    """Decode images one by one (e.g. a split's or an odometry sequence's frames) as :class:`Frame`."""
+    for index, path in enumerate(paths):
+        yield Frame(path.stem, index, index / fps, np.asarray(load_rgb(path)))
 
 
 class FrameSource:
@@ -83,8 +89,7 @@ class FrameSource:
         if self.is_video:
             yield from self._video_frames()
             return
-        for index, path in enumerate(self.images):
-            yield Frame(path.stem, index, index / self.fps, np.asarray(load_rgb(path)))
+        yield from frames_from_paths(self.images, self.fps)
 
     def _open(self):
         import av

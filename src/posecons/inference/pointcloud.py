@@ -7,15 +7,21 @@ from pathlib import Path
 import numpy as np
 
 
+def backproject_pixels(u: np.ndarray, v: np.ndarray, z: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pixel columns u (N,), rows v (N,) and depths z (N,) with pixel K (3, 3) → (N, 3) float64 camera
+    points X = z·K⁻¹[u, v, 1]ᵀ (the numpy twin of :func:`posecons.geometry.backproject`)."""
+    rays = np.linalg.inv(K) @ np.stack([u, v, np.ones_like(u)]).astype(np.float64)
+    return (rays * z).T
+
+
 def depth_to_points(depth: np.ndarray, image: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) depth, (H, W, 3) uint8 colours, pixel K (3, 3) → camera points (N, 3) float32 and
-    colours (N, 3) uint8, one per valid pixel (finite depth > 0): X = D·K⁻¹[u, v, 1]ᵀ."""
+    colours (N, 3) uint8, one per valid pixel (finite depth > 0)."""
     h, w = depth.shape
     v, u = np.mgrid[0:h, 0:w]
     valid = np.isfinite(depth) & (depth > 0)
-    pixels = np.stack([u[valid], v[valid], np.ones(int(valid.sum()))]).astype(np.float64)
-    points = (np.linalg.inv(K) @ pixels) * depth[valid]
-    return points.T.astype(np.float32), image[valid].astype(np.uint8)
+    points = backproject_pixels(u[valid], v[valid], depth[valid], K)
+    return points.astype(np.float32), image[valid].astype(np.uint8)
 
 
 def write_ply(path: str | Path, points: np.ndarray, colors: np.ndarray, binary: bool = True) -> None:

@@ -21,25 +21,25 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from PIL import Image
 from tqdm import tqdm
 
+from ..data.calib import normalised_to_pixel
+from ..data.gt import GroundTruth
+from ..data.trajectory_io import write_kitti_poses, write_tum
 from ..errors import PoseconsError
-from ..evaluation.pose import global_from_relative
-from ..evaluation.trajectory_io import write_kitti_poses, write_tum
+from ..metrics.depth import drift_stats, frame_scale, resize_disparity
+from ..metrics.pose import global_from_relative
+from ..plots import colorize, plot_scale_drift, plot_trajectory_topview
 from . import scale as scaling
-from .backend import Predictor
-from .camera import normalised_to_pixel, resolve_intrinsics
-from ..data.io import resize_rgb
+from .backend import Predictor, StepChain, predict_batches
+from .camera import resolve_intrinsics
 from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, staged_output
-from .plots import colorize, plot_scale_drift, plot_topview
 from .pointcloud import depth_to_points, write_ply
 
 
@@ -74,44 +74,26 @@ class PredictOptions:
         return self
 
 
-def batches(source: FrameSource, predictor: Predictor, size: int) -> Iterator[tuple[list[Frame], np.ndarray, torch.Tensor]]:
-    """(frames, network images (B, 3, h, w), scaled disparities (B, 1, h, w)) per batch."""
-    frames: list[Frame] = []
-    for frame in source:
-        frames.append(frame)
-        if len(frames) == size:
-            yield _run(frames, predictor)
-            frames = []
-    if frames:
-        yield _run(frames, predictor)
-
-
-def _run(frames: list[Frame], predictor: Predictor) -> tuple[list[Frame], np.ndarray, torch.Tensor]:
-    images = np.stack([resize_rgb(f.image, predictor.height, predictor.width) for f in frames])
-    return frames, images, predictor.disparity(images)
-
-
 def full_size_depth(disparity: torch.Tensor, height: int, width: int) -> np.ndarray:
     """(1, h, w) scaled disparity → (height, width) float32 depth: bilinear resize, then invert."""
-    disp = F.interpolate(disparity[None].float(), size=(height, width), mode="bilinear", align_corners=False)
-    return (1.0 / disp[0, 0]).cpu().numpy()
+    return 1.0 / resize_disparity(disparity[0].float().cpu().numpy(), height, width)
 
 
 def calibrate(source: FrameSource, predictor: Predictor, options: PredictOptions, K_norm: np.ndarray,
-              gt: scaling.GroundTruth | None) -> scaling.ScaleResult:
+              gt: GroundTruth | None) -> scaling.ScaleResult:
     """The sequence's scale from the first frames (see :class:`PredictOptions`)."""
     if options.scale is not None:
         return scaling.ScaleResult("given", float(options.scale))
     if gt is None and options.camera_height is None:
         return scaling.ScaleResult("none", 1.0)
     names, scales = [], []
-    for frames, _, disps in batches(source, predictor, options.batch_size):
+    for frames, _, disps in predict_batches(predictor, source, options.batch_size):
         for frame, disp in zip(frames, disps):
             if gt is not None:
                 target = gt.get(frame.name, frame.index)
                 if target is None:
                     continue
-                scales.append(scaling.frame_scale(target, disp[0].cpu().numpy()))
+                scales.append(frame_scale(target, disp[0].cpu().numpy()))
             else:
                 depth = full_size_depth(disp, *frame.size)
                 height = scaling.camera_height(depth, normalised_to_pixel(K_norm, *frame.size))
@@ -146,7 +128,7 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
     source = FrameSource(input, options.fps)
     first = next(iter(source))
     K_norm = resolve_intrinsics(options.intrinsics, options.calib, *first.size)
-    gt = scaling.GroundTruth(options.calibrate_gt) if options.calibrate_gt else None
+    gt = GroundTruth(options.calibrate_gt) if options.calibrate_gt else None
     do_pose = options.trajectory and predictor.has_pose
     start = time.perf_counter()
     result = calibrate(source, predictor, options, K_norm, gt)
@@ -158,14 +140,11 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
         for name in folders:
             (tmp / name).mkdir()
         writer = SideBySideWriter(tmp / "video.mp4", fps) if source.is_video and options.video else None
-        steps, times, drift, previous, count = [], [], [], None, 0
+        chain, times, drift, count = StepChain(predictor), [], [], 0
         bar = tqdm(total=len(source) or None, unit="frame", disable=not options.progress)
-        for frames, images, disps in batches(source, predictor, options.batch_size):
-            if do_pose:  # pairs (I_i, I_{i+1}) give T_{i+1←i}; the first frame has no predecessor
-                a = images[:-1] if previous is None else np.concatenate([previous, images[:-1]])
-                if len(a):
-                    steps.append(predictor.pose(a, images[len(images) - len(a):]))
-                previous = images[-1:]
+        for frames, images, disps in predict_batches(predictor, source, options.batch_size):
+            if do_pose:
+                chain.add(images)
             for frame, disp in zip(frames, disps):
                 depth = full_size_depth(disp, *frame.size) * np.float32(s)
                 color = _write_depth(tmp, frame, depth, 1.0 / depth)
@@ -177,7 +156,7 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
                               binary=not options.ascii_ply)
                 target = gt.get(frame.name, frame.index) if gt is not None else None
                 if target is not None:
-                    drift.append((frame.index, frame.name, scaling.frame_scale(target, disp[0].cpu().numpy())))
+                    drift.append((frame.index, frame.name, frame_scale(target, disp[0].cpu().numpy())))
                 times.append(frame.time)
                 count += 1
             bar.update(len(frames))
@@ -187,18 +166,18 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
 
         outputs = folders + (["video.mp4"] if writer is not None else [])
         if do_pose:
-            relative = np.concatenate(steps) if steps else np.zeros((0, 4, 4))
+            relative = chain.steps()
             relative[:, :3, 3] *= s  # the sequence scale applies to translations too
             poses = global_from_relative(relative)
             write_kitti_poses(tmp / "trajectory_kitti.txt", poses)
             write_tum(tmp / "trajectory_tum.txt", poses, np.asarray(times))
-            plot_topview(poses, tmp / "trajectory.png")
+            plot_trajectory_topview(poses, tmp / "trajectory.png")
             outputs += ["trajectory_kitti.txt", "trajectory_tum.txt", "trajectory.png"]
 
         scale_info = result.to_dict()
         if drift:
             index, per_frame = np.array([d[0] for d in drift]), np.array([d[2] for d in drift])
-            scale_info["drift"] = {**scaling.drift_stats(per_frame, s),
+            scale_info["drift"] = {**drift_stats(per_frame, s),
                                    "per_frame": {name: float(v) for _, name, v in drift}}
             plot_scale_drift(index, per_frame, s, index[: len(result.frames)], tmp / "scale_drift.png")
             outputs.append("scale_drift.png")

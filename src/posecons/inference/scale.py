@@ -1,5 +1,5 @@
-"""One metric scale per sequence: given, from ground truth (median ratio), or from the camera's
-height above a fitted ground plane; plus the drift of per-frame scales from the chosen one.
+"""One metric scale per sequence: given, from ground truth (median ratio, :func:`~posecons.metrics.depth.frame_scale`),
+or from the camera's height above a fitted ground plane.
 
 Depth maps here are (H, W) float arrays at the original image size, in the model's units.
 """
@@ -7,67 +7,16 @@ Depth maps here are (H, W) float arrays at the original image size, in the model
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ..data.gt import read_improved_gt
 from ..errors import PoseconsError
-from ..evaluation.depth import median_scale, resize_disparity
+from .pointcloud import backproject_pixels
 
 GROUND_ROWS = (0.6, 1.0)  # image rows (fractions of H) searched for the ground plane
 GROUND_COLS = (0.2, 0.8)  # central columns: the road rather than parked cars and walls
 MAX_TILT_DEG = 30.0  # accepted angle between the plane normal and the camera's down axis
 
-
-class GroundTruth:
-    """Per-frame depth ground truth (metres, 0 = invalid): a folder of 16-bit KITTI-style PNGs
-    (value / 256) named like the input frames, or an export-gt NPZ (keys 000000, 000001, … by
-    frame index, plus ``lines``)."""
-
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
-        self.npz = None
-        if self.path.is_file() and self.path.suffix == ".npz":
-            try:
-                self.npz = np.load(self.path, allow_pickle=False)
-                self.keys = set(self.npz.files)
-            except (OSError, ValueError) as exc:
-                raise PoseconsError(f"{self.path}: not a readable ground-truth NPZ ({exc})") from exc
-        elif not self.path.is_dir():
-            raise PoseconsError(f"{self.path}: ground truth must be a folder of 16-bit PNGs or an .npz file")
-
-    def get(self, name: str, index: int) -> np.ndarray | None:
-        """(H, W) float32 depth of the frame called ``name`` at ``index``, or None if there is none."""
-        if self.npz is not None:
-            key = f"{index:06d}"
-            return self.npz[key].astype(np.float32) if key in self.keys else None
-        png = self.path / f"{name}.png"
-        return read_improved_gt(png) if png.is_file() else None
-
-
-def frame_scale(gt: np.ndarray, disparity: np.ndarray) -> float:
-    """median(gt) / median(pred) over the valid GT pixels; disparity (h, w) is resized to the GT
-    size first (SPEC §9). NaN when the frame has no valid pixel."""
-    valid = np.isfinite(gt) & (gt > 0)
-    if not valid.any():
-        return float("nan")
-    pred = 1.0 / resize_disparity(disparity, *gt.shape)
-    return median_scale(gt[valid], pred[valid])
-
-
-def drift_stats(scales: np.ndarray, scale: float) -> dict:
-    """σ/μ (population σ) of per-frame scales and their largest relative deviation from ``scale``."""
-    scales = np.asarray(scales, dtype=np.float64)
-    scales = scales[np.isfinite(scales)]
-    if scales.size == 0:
-        return {}
-    return {"frames": int(scales.size), "cv": float(scales.std() / scales.mean()),
-            "max_rel_deviation": float(np.abs(scales / scale - 1).max()),
-            "mean": float(scales.mean()), "min": float(scales.min()), "max": float(scales.max())}
-
-
-# ----------------------------------------------------------------------------- ground plane
 
 def fit_ground_plane(points: np.ndarray, iterations: int = 200, seed: int = 0) -> tuple[np.ndarray, float, int]:
     """RANSAC then least squares: (N, 3) camera points (x right, y down, z forward) → (unit normal n,
@@ -108,8 +57,7 @@ def ground_points(depth: np.ndarray, K: np.ndarray, max_points: int = 20000, see
     if len(z) > max_points:
         pick = np.random.default_rng(seed).choice(len(z), max_points, replace=False)
         u, v, z = u[pick], v[pick], z[pick]
-    rays = np.linalg.inv(K) @ np.stack([u, v, np.ones_like(u)]).astype(np.float64)
-    return (rays * z).T
+    return backproject_pixels(u, v, z, K)
 
 
 def camera_height(depth: np.ndarray, K: np.ndarray) -> float:

@@ -8,22 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..config import load_config
+from ..config import load_config, resolve_preset
 from ..errors import PoseconsError
-
-PRESETS = Path(__file__).resolve().parents[1] / "configs"
-
-
-def resolve_preset(name: str) -> Path:
-    """A preset file path, or a bundled preset name such as ``kitti/cycle``."""
-    path = Path(name)
-    if path.is_file():
-        return path
-    bundled = PRESETS / (name if name.endswith(".yaml") else f"{name}.yaml")
-    if bundled.is_file():
-        return bundled
-    names = sorted(str(p.relative_to(PRESETS).with_suffix("")) for p in PRESETS.rglob("*.yaml"))
-    raise PoseconsError(f"config {name!r} is neither a file nor a bundled preset ({', '.join(names)})")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

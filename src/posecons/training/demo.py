@@ -1,7 +1,8 @@
-"""`make demo`: synthetic KITTI-format data → CPU training with the cycle constraint →
-evaluation with the evaluation commands → ``report.md`` (with plots) and ``summary.json``.
+"""`make demo`: synthetic KITTI-format data → CPU training with the cycle constraint → evaluation
+→ ``report.md`` (with plots) and ``summary.json``.
 
-Everything goes through the same commands a user would type, so the demo also proves them.
+A short script over the library functions the commands also call: ``generate_synth``, ``export_gt``,
+``train`` and the evaluation runs of :mod:`posecons.evaluation.evaluate`.
 """
 
 from __future__ import annotations
@@ -11,66 +12,65 @@ import shutil
 import time
 from pathlib import Path
 
-import matplotlib
+import torch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import torch  # noqa: E402
-
-from ..checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
-from ..cli import main as cli  # noqa: E402
-from ..config import load_config  # noqa: E402
-from ..errors import PoseconsError  # noqa: E402
-from ..model import PoseConsModel  # noqa: E402
-from .commands import resolve_preset  # noqa: E402
-from .trainer import train  # noqa: E402
+from ..checkpoint import describe_checkpoint, save_checkpoint
+from ..config import load_config, resolve_preset
+from ..data.gt import export_gt, load_gt
+from ..data.kitti_odometry import list_sequence_frames
+from ..data.splits import SplitLine, read_split
+from ..data.synth import generate_synth
+from ..data.trajectory_io import read_kitti_poses
+from ..evaluation import evaluate
+from ..evaluation.compare import checkpoint_note
+from ..inference.backend import load_predictor
+from ..metrics.pose import global_from_relative
+from ..model import PoseConsModel
+from ..plots import plot_validation
+from .trainer import train
 
 # The demo's synthetic data set: small frames keep decoding cheap on a 2-core CPU.
-SYNTH_ARGS = ["--drives", "6", "--frames", "120", "--width", "384", "--height", "128", "--neighbours", "3"]
+SYNTH = {"drives": 6, "frames": 120, "width": 384, "height": 128, "neighbours": 3}
 
 
-def _run(*argv: str) -> None:
-    code = cli([str(a) for a in argv])
-    if code:
-        raise PoseconsError(f"`posecons {' '.join(map(str, argv))}` failed with exit code {code}")
+def _evaluate_depth(checkpoint: Path, data: Path, split: list[SplitLine], gt: Path, plots: Path | None = None) -> dict:
+    """Depth metrics and σ/μ of a checkpoint on the test split."""
+    gts, _ = load_gt(gt)
+    disps = evaluate.model_disparities(load_predictor(checkpoint, "auto"), data, split)
+    result = evaluate.depth_result(disps, gts, split, pred_name=str(checkpoint), gt_name=str(gt))
+    if plots is not None:
+        evaluate.write_depth_plots(result, split, plots)
+    return result
 
 
-def _plot_validation(metrics_file: Path, path: Path) -> Path | None:
-    """Validation abs rel and photometric loss over training steps."""
-    if not metrics_file.is_file():
-        return None
-    rows = [json.loads(line) for line in metrics_file.read_text().splitlines() if line.strip()]
-    if not rows:
-        return None
-    steps = [r["step"] for r in rows]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.plot(steps, [r["val_photometric"] for r in rows], "o-", label="val photometric loss")
-    ax.set_xlabel("step")
-    ax.set_ylabel("photometric loss")
-    handles = list(ax.get_lines())
-    if "abs_rel" in rows[0]:
-        ax2 = ax.twinx()
-        handles += ax2.plot(steps, [r["abs_rel"] for r in rows], "s-", color="tab:red", label="val abs rel")
-        ax2.set_ylabel("abs rel (median-scaled)", color="tab:red")
-    ax.legend(handles=handles, loc="upper right")
-    ax.set_title("validation during training")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+def _evaluate_pose(checkpoint: Path, odometry: Path, sequence: str, plots: Path) -> dict:
+    """Snippet ATE, full ATE / RPE and the constant-velocity baseline of a checkpoint on one sequence."""
+    gt_file = odometry / "poses" / f"{sequence}.txt"
+    gt = read_kitti_poses(gt_file)
+    steps = evaluate.model_steps(load_predictor(checkpoint, "auto"), list_sequence_frames(odometry, sequence))
+    estimate = global_from_relative(steps)
+    evaluate.write_trajectories(plots, estimate, gt)
+    return evaluate.pose_result(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
 
 
-def run_demo(out: Path, seed: int = 0, synth_args: list[str] = SYNTH_ARGS, overrides: list[str] = ()) -> dict:
-    """Run the whole demo into ``out``; ``synth_args``/``overrides`` shrink it for tests."""
+def _read_jsonl(path: Path) -> list[dict]:
+    """The records of a JSON-lines file (none if it does not exist)."""
+    lines = path.read_text().splitlines() if path.is_file() else []
+    return [json.loads(line) for line in lines if line.strip()]
+
+
+def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str] = ()) -> dict:
+    """Run the whole demo into ``out``; ``synth`` (``generate_synth`` arguments) and ``overrides`` shrink
+    it for tests."""
     start = time.time()
     out.mkdir(parents=True, exist_ok=True)
     data, run, ev, plots = out / "data", out / "run", out / "eval", out / "plots"
     meta_file = data / "synth.json"
     if not meta_file.is_file():
         print("[1/5] generating the synthetic KITTI-format data set", flush=True)
-        _run("synth", "--out", data, "--seed", seed, *synth_args)
+        generate_synth(data, seed=seed, **synth)
     meta = json.loads(meta_file.read_text())
-    test_split = data / "splits" / "synth" / "test_files.txt"
+    test_split = read_split(data / "splits" / "synth" / "test_files.txt")
     odom_seq = f"{int(meta['test_sequences'][0]):02d}"
 
     config = load_config(resolve_preset("synth/demo"), [f"train.seed={seed}", *overrides])
@@ -80,31 +80,29 @@ def run_demo(out: Path, seed: int = 0, synth_args: list[str] = SYNTH_ARGS, overr
 
     print("[2/5] exporting test ground truth and evaluating the untrained network", flush=True)
     gt = ev / "gt_test.npz"
-    _run("export-gt", "--data-path", data, "--split-file", test_split, "--out", gt)
-    _run("evaluate-depth", "--checkpoint", untrained, "--data-path", data, "--split-file", test_split,
-         "--gt", gt, "--json", ev / "depth_untrained.json")
+    export_gt(data, test_split, gt)
+    before = _evaluate_depth(untrained, data, test_split, gt)
+    evaluate.write_json(ev / "depth_untrained.json", before)
 
     print("[3/5] training (synth/demo preset, cycle constraint) on the CPU", flush=True)
     shutil.rmtree(run, ignore_errors=True)
     train_start = time.time()
     train(config, data, run, accelerator="cpu")
     train_minutes = (time.time() - train_start) / 60
-    # The checkpoint with the best validation abs rel: short CPU runs are noisy late in training.
+    # best.pt, chosen as the preset's train.best_metric says: short CPU runs are noisy late in training.
     ckpt = run / "checkpoints" / "best.pt"
-    ckpt_step = load_checkpoint(ckpt)["step"]
+    weights = describe_checkpoint(ckpt)
 
     print("[4/5] evaluating depth (Eigen metrics, σ/μ) and pose (ATE) on the held-out drives", flush=True)
-    _run("evaluate-depth", "--checkpoint", ckpt, "--data-path", data, "--split-file", test_split,
-         "--gt", gt, "--json", ev / "depth.json", "--plots", plots)
-    _run("evaluate-pose", "--checkpoint", ckpt, "--data-path", data / "odometry", "--sequence", odom_seq,
-         "--gt-poses", data / "odometry" / "poses" / f"{odom_seq}.txt", "--json", ev / "pose.json",
-         "--out-dir", plots)
-    _plot_validation(run / "metrics.jsonl", plots / "validation.png")
+    depth = {**_evaluate_depth(ckpt, data, test_split, gt, plots), "checkpoint": weights}
+    evaluate.write_json(ev / "depth.json", depth)
+    pose = {**_evaluate_pose(ckpt, data / "odometry", odom_seq, plots), "checkpoint": weights}
+    evaluate.write_json(ev / "pose.json", pose)
+    validations = _read_jsonl(run / "metrics.jsonl")
+    if validations:
+        plot_validation(validations, plots / "validation.png")
 
     print("[5/5] writing the report", flush=True)
-    depth = json.loads((ev / "depth.json").read_text())
-    before = json.loads((ev / "depth_untrained.json").read_text())
-    pose = json.loads((ev / "pose.json").read_text())
     summary = {
         "abs_rel": depth["abs_rel"], "abs_rel_untrained": before["abs_rel"],
         "abs_rel_improvement": 1 - depth["abs_rel"] / before["abs_rel"],
@@ -113,7 +111,7 @@ def run_demo(out: Path, seed: int = 0, synth_args: list[str] = SYNTH_ARGS, overr
         "ate_mean": pose["ate_mean"], "ate_std": pose["ate_std"], "ate_full_rmse": pose["ate_full_rmse"],
         "ate_mean_const_velocity": pose["const_velocity"]["ate_mean"],
         "ate_full_rmse_const_velocity": pose["const_velocity"]["ate_full_rmse"],
-        "checkpoint_step": ckpt_step, "train_minutes": train_minutes, "minutes": (time.time() - start) / 60,
+        "checkpoint": weights, "train_minutes": train_minutes, "minutes": (time.time() - start) / 60,
         "config": config.to_dict(),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -132,8 +130,8 @@ def _report(s: dict, depth: dict, before: dict, pose: dict, seq: str, meta: dict
 
 Synthetic KITTI-format data (seed {meta.get('seed')}, {len(meta.get('drives', []))} drives), ResNet-{m['num_layers']}
 at {m['width']}×{m['height']}, batch {t['batch_size']}, lr {t['lr']}, {t['max_steps']} steps with the **cycle**
-constraint, trained on the CPU in {s['train_minutes']:.1f} min (whole demo {s['minutes']:.1f} min); evaluated
-at step {s['checkpoint_step']}, the checkpoint with the best validation abs rel.
+constraint, trained on the CPU in {s['train_minutes']:.1f} min (whole demo {s['minutes']:.1f} min).
+Evaluated: {checkpoint_note(s['checkpoint'])}.
 Test: the held-out drives' `test_files.txt`, LiDAR ground truth, Garg crop, per-frame median scaling.
 
 ## Depth (paper Table 1 layout)

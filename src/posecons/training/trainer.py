@@ -38,9 +38,9 @@ from tqdm import tqdm
 
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
+from ..data.datasets import build_dataset, split_files
 from ..errors import PoseconsError
 from ..model import PoseConsModel
-from .data import build_dataset, split_files
 from .validation import Validator
 
 

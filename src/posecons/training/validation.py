@@ -15,10 +15,10 @@ import torch
 from torch.utils.data import DataLoader, Subset
 
 from ..config import Config
+from ..data.datasets import build_dataset
 from ..data.gt import export_gt, load_gt
-from ..evaluation.depth import evaluate_depth
 from ..geometry import disp_to_depth
-from .data import build_dataset
+from ..metrics.depth import evaluate_depth
 
 
 class Validator:

@@ -29,9 +29,9 @@ from PIL import Image
 from ...errors import PoseconsError
 from ..calib import format_calib
 from ..io import atomic_dir
-from ..kitti_odometry import write_poses
 from ..oxts import DATAFORMAT, format_oxts, poses_to_oxts
 from ..splits import SplitLine, write_split
+from ..trajectory_io import write_kitti_poses
 from .motion import Trajectory, extended_path, make_trajectory
 from .primitives import Primitive
 from .render import Lidar, Shading, render_camera, shading_tables
@@ -143,7 +143,7 @@ def _write_drive_metadata(drive: Drive, rig: Rig, drive_dir: Path, sequence: str
     (seq_dir / "calib.txt").write_text(format_calib(calib, calib_time=None))
     (seq_dir / "times.txt").write_text("".join(f"{i / FPS:e}\n" for i in range(frames)))
     cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(frames)])
-    write_poses(odometry / "poses" / f"{sequence}.txt", np.linalg.inv(cam0[0]) @ cam0)
+    write_kitti_poses(odometry / "poses" / f"{sequence}.txt", np.linalg.inv(cam0[0]) @ cam0)
 
 
 def moving_frames(drive: Drive, rig: Rig, neighbours: int = 1) -> list[int]:

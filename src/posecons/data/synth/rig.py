@@ -13,7 +13,6 @@ from functools import cached_property
 
 import numpy as np
 
-
 KITTI_SIZE = (1242, 375)
 CAM_TO_CAM = {
     "corner_dist": [9.950000e-02],

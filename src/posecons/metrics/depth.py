@@ -1,4 +1,4 @@
-"""Depth metrics and the standard KITTI depth protocol (SPEC §9).
+"""Depth metrics, scale statistics and the standard KITTI depth protocol (SPEC §9).
 
 Plain numpy functions, cheap enough for training-time validation. The protocol:
 resize the predicted (scaled) disparity bilinearly to the GT size (``align_corners=False``),
@@ -77,6 +77,27 @@ def compute_depth_metrics(gt: np.ndarray, pred: np.ndarray) -> dict[str, float]:
 def median_scale(gt: np.ndarray, pred: np.ndarray) -> float:
     """Median scaling factor median(gt) / median(pred) over matching 1-D arrays of valid depths."""
     return float(np.median(gt) / np.median(pred))
+
+
+def frame_scale(gt: np.ndarray, disparity: np.ndarray) -> float:
+    """median(gt) / median(pred) over the valid GT pixels; disparity (h, w) is resized to the GT
+    size first (SPEC §9). NaN when the frame has no valid pixel."""
+    valid = np.isfinite(gt) & (gt > 0)
+    if not valid.any():
+        return float("nan")
+    pred = 1.0 / resize_disparity(disparity, *gt.shape)
+    return median_scale(gt[valid], pred[valid])
+
+
+def drift_stats(scales: np.ndarray, scale: float) -> dict:
+    """σ/μ (population σ) of per-frame scales and their largest relative deviation from ``scale``."""
+    scales = np.asarray(scales, dtype=np.float64)
+    scales = scales[np.isfinite(scales)]
+    if scales.size == 0:
+        return {}
+    return {"frames": int(scales.size), "cv": float(scales.std() / scales.mean()),
+            "max_rel_deviation": float(np.abs(scales / scale - 1).max()),
+            "mean": float(scales.mean()), "min": float(scales.min()), "max": float(scales.max())}
 
 
 def check_disparities(disps: np.ndarray, name: str = "predictions") -> np.ndarray:

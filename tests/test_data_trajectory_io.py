@@ -1,11 +1,11 @@
-"""KITTI and TUM trajectory files: round trips, quaternion conventions and bad input."""
+"""KITTI and TUM trajectory files: round trips and bad input (quaternions: test_metrics_pose)."""
 
 import numpy as np
 import pytest
 
+from posecons.data.trajectory_io import read_kitti_poses, read_times, read_tum, write_kitti_poses, write_tum
 from posecons.errors import PoseconsError
-from posecons.evaluation.trajectory_io import (quaternion_to_rotation, read_kitti_poses, read_times, read_tum,
-                                               rotation_to_quaternion, write_kitti_poses, write_tum)
+from posecons.metrics.pose import quaternion_to_rotation
 
 
 def _random_poses(n: int, seed: int = 0) -> np.ndarray:
@@ -15,15 +15,6 @@ def _random_poses(n: int, seed: int = 0) -> np.ndarray:
     poses[:, :3, :3] = quaternion_to_rotation(q)
     poses[:, :3, 3] = rng.standard_normal((n, 3)) * 50
     return poses
-
-
-def test_quaternion_convention_and_round_trip():
-    # 90° about z: q = (0, 0, sin 45°, cos 45°) in (x, y, z, w) order.
-    Rz = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
-    assert np.allclose(rotation_to_quaternion(Rz[None]), [[0, 0, np.sqrt(0.5), np.sqrt(0.5)]])
-    # Includes 180° rotations, where w = 0 and the trace-based formula alone would divide by zero.
-    R = np.concatenate([_random_poses(200)[:, :3, :3], np.diag([1.0, -1, -1])[None], np.diag([-1.0, -1, 1])[None]])
-    assert np.allclose(quaternion_to_rotation(rotation_to_quaternion(R)), R, atol=1e-12)
 
 
 def test_kitti_round_trip_and_real_file(tmp_path, kitti_dir):

@@ -4,8 +4,18 @@ import numpy as np
 import pytest
 
 from posecons.errors import PoseconsError
-from posecons.evaluation.depth import (MAX_DEPTH, MIN_DEPTH, compute_depth_metrics, evaluate_depth,
-                                       garg_crop_bounds, resize_disparity, scale_consistency, valid_mask)
+from posecons.metrics.depth import (
+    MAX_DEPTH,
+    MIN_DEPTH,
+    compute_depth_metrics,
+    drift_stats,
+    evaluate_depth,
+    frame_scale,
+    garg_crop_bounds,
+    resize_disparity,
+    scale_consistency,
+    valid_mask,
+)
 
 
 def test_garg_crop_bounds_on_a_kitti_frame():
@@ -122,3 +132,18 @@ def test_count_mismatch_names_both_inputs():
     disp, gt = _frame(10.0, 5.0)
     with pytest.raises(PoseconsError, match="pred.npy has 2 frames but gt.npz has 1"):
         evaluate_depth(np.stack([disp, disp]), [gt], ["a"], pred_name="pred.npy", gt_name="gt.npz")
+
+
+def test_frame_scale_resizes_the_disparity_and_skips_frames_without_gt():
+    gt = np.full((4, 6), 10.0)
+    gt[0] = 0.0  # invalid pixels are left out of the median
+    disp = np.full((2, 3), 0.5, np.float32)  # depth 2 everywhere
+    assert frame_scale(gt, disp) == pytest.approx(5.0)
+    assert np.isnan(frame_scale(np.zeros((4, 6)), disp))
+
+
+def test_drift_stats_ignore_nan_and_measure_the_deviation_from_the_chosen_scale():
+    stats = drift_stats(np.array([1.0, 2.0, np.nan, 3.0]), 2.0)
+    assert stats["frames"] == 3 and stats["max_rel_deviation"] == pytest.approx(0.5)
+    assert stats["cv"] == pytest.approx(np.std([1.0, 2.0, 3.0]) / 2.0)
+    assert drift_stats(np.array([np.nan]), 1.0) == {}

@@ -1,13 +1,23 @@
-"""Pose metrics: snippet ATE (SPEC §10), Sim(3) alignment, RPE and the constant-velocity baseline."""
+"""Pose maths: quaternions, snippet ATE (SPEC §10), Sim(3) alignment, RPE and the constant-velocity baseline."""
 
 import numpy as np
 import pytest
 
+from posecons.data.trajectory_io import read_kitti_poses
 from posecons.errors import PoseconsError
-from posecons.evaluation.pose import (apply_sim3, constant_velocity_steps, evaluate_pose, global_from_relative,
-                                      invert_rigid, relative_from_global, relative_pose_error, snippet_errors,
-                                      umeyama)
-from posecons.evaluation.trajectory_io import read_kitti_poses
+from posecons.metrics.pose import (
+    apply_sim3,
+    constant_velocity_steps,
+    evaluate_pose,
+    global_from_relative,
+    invert_rigid,
+    quaternion_to_rotation,
+    relative_from_global,
+    relative_pose_error,
+    rotation_to_quaternion,
+    snippet_errors,
+    umeyama,
+)
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -128,3 +138,13 @@ def test_count_mismatch():
     with pytest.raises(PoseconsError, match="9 predicted poses but 10 ground-truth poses"):
         evaluate_pose(G[:-1], G)
     assert np.allclose(invert_rigid(G) @ G, np.eye(4))
+
+
+def test_quaternion_convention_and_round_trip():
+    # 90° about z: q = (0, 0, sin 45°, cos 45°) in (x, y, z, w) order.
+    Rz = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    assert np.allclose(rotation_to_quaternion(Rz[None]), [[0, 0, np.sqrt(0.5), np.sqrt(0.5)]])
+    # Includes 180° rotations, where w = 0 and the trace-based formula alone would divide by zero.
+    random = quaternion_to_rotation(np.random.default_rng(0).standard_normal((200, 4)))
+    R = np.concatenate([random, np.diag([1.0, -1, -1])[None], np.diag([-1.0, -1, 1])[None]])
+    assert np.allclose(quaternion_to_rotation(rotation_to_quaternion(R)), R, atol=1e-12)

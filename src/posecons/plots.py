@@ -1,6 +1,7 @@
-"""Evaluation figures (PNG, matplotlib Agg): frame scales per sequence, scale over time for the
-least consistent sequences (the paper's Figure 1), the per-frame abs rel histogram, and the
-top view of a trajectory."""
+"""Every figure of the package (PNG files, matplotlib Agg): evaluation (frame scales per sequence,
+scale over time for the least consistent sequences as in the paper's Figure 1, the per-frame abs rel
+histogram), training (validation curves), prediction (colour-mapped disparity, scale drift) and the
+top view of a trajectory. Nothing else in the package imports matplotlib."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ import matplotlib
 matplotlib.use("Agg")  # files only; never needs a display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+COLORMAP = "magma"
 
 
 def _save(fig: plt.Figure, path: str | Path) -> Path:
@@ -82,14 +85,60 @@ def plot_error_histogram(abs_rel: Sequence[float], path: str | Path, bins: int =
     return _save(fig, path)
 
 
-def plot_trajectory_topview(gt: np.ndarray, pred: np.ndarray, path: str | Path, label: str = "prediction") -> Path:
-    """Top view (x right, z forward) of (N, 4, 4) camera → world GT and predicted poses."""
+def plot_trajectory_topview(poses: np.ndarray, path: str | Path, gt: np.ndarray | None = None,
+                            label: str = "camera") -> Path:
+    """Top view (x right, z forward) of (N, 4, 4) camera → world poses, over (N, 4, 4) ground truth
+    (then in metres) when given."""
     fig, ax = plt.subplots(figsize=(6, 6))
-    ax.plot(gt[:, 0, 3], gt[:, 2, 3], "k-", label="ground truth")
-    ax.plot(pred[:, 0, 3], pred[:, 2, 3], "-", label=label)
-    ax.plot(gt[0, 0, 3], gt[0, 2, 3], "ko")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("z [m]")
+    if gt is not None:
+        ax.plot(gt[:, 0, 3], gt[:, 2, 3], "k-", label="ground truth")
+    ax.plot(poses[:, 0, 3], poses[:, 2, 3], "-", label=label)
+    start = poses[0] if gt is None else gt[0]
+    ax.plot(start[0, 3], start[2, 3], "ko", label="start")
+    unit = "" if gt is None else " [m]"
+    ax.set_xlabel(f"x{unit}")
+    ax.set_ylabel(f"z{unit}")
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend()
+    return _save(fig, path)
+
+
+def plot_validation(rows: Sequence[dict], path: str | Path) -> Path:
+    """Validation photometric loss (and abs rel, where the records have it) against the training step;
+    ``rows`` are the records of ``RUN/metrics.jsonl``."""
+    steps = [r["step"] for r in rows]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot(steps, [r["val_photometric"] for r in rows], "o-", label="val photometric loss")
+    ax.set_xlabel("step")
+    ax.set_ylabel("photometric loss")
+    handles = list(ax.get_lines())
+    if "abs_rel" in rows[0]:
+        ax2 = ax.twinx()
+        handles += ax2.plot(steps, [r["abs_rel"] for r in rows], "s-", color="tab:red", label="val abs rel")
+        ax2.set_ylabel("abs rel (median-scaled)", color="tab:red")
+    ax.legend(handles=handles, loc="upper right")
+    ax.set_title("validation during training")
+    return _save(fig, path)
+
+
+def colorize(disparity: np.ndarray, cmap: str = COLORMAP) -> np.ndarray:
+    """(H, W) disparity → (H, W, 3) uint8, normalised per frame to [min, 95th percentile] so a few
+    very near pixels do not wash out the rest."""
+    lo, hi = float(disparity.min()), float(np.percentile(disparity, 95))
+    norm = np.clip((disparity - lo) / max(hi - lo, 1e-12), 0, 1)
+    return (matplotlib.colormaps[cmap](norm)[..., :3] * 255).astype(np.uint8)
+
+
+def plot_scale_drift(indices: np.ndarray, scales: np.ndarray, scale: float, calibration: np.ndarray,
+                     path: str | Path) -> Path:
+    """Per-frame GT scale (N,) against frame index (N,), the sequence scale as a line, calibration
+    frames marked."""
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot(indices, scales, ".-", label="per-frame median(gt)/median(pred)")
+    used = np.isin(indices, calibration)
+    ax.plot(indices[used], scales[used], "o", mfc="none", label="calibration frames")
+    ax.axhline(scale, color="k", linestyle="--", label=f"sequence scale {scale:.4g}")
+    ax.set_xlabel("frame")
+    ax.set_ylabel("scale")
+    ax.legend(fontsize=8)
     return _save(fig, path)

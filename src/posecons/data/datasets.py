@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..config import Config
-from ..data.frames import FrameDataset
-from ..data.kitti_odometry import KittiOdometryDataset
-from ..data.kitti_raw import KittiRawDataset
 from ..errors import PoseconsError
+from .frames import FrameDataset
+from .kitti_odometry import KittiOdometryDataset
+from .kitti_raw import KittiRawDataset
 
 
 def split_files(config: Config, data_path: str | Path, split_dir: str | Path | None) -> tuple[Path, Path | None]:

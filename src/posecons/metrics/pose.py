@@ -1,4 +1,5 @@
-"""Ego-motion metrics: the standard 5-frame snippet ATE (SPEC §10) and full-trajectory ATE / RPE.
+"""Ego-motion maths: rigid transforms and quaternions in numpy, Umeyama alignment, the standard
+5-frame snippet ATE (SPEC §10) and full-trajectory ATE / RPE.
 
 Conventions: global poses G are camera → world (KITTI pose files); the relative pose of step i is
 T_i = T_{i+1←i} = inv(G_{i+1}) · G_i, the same transform the pose net returns for the ordered pair
@@ -38,6 +39,40 @@ def global_from_relative(T: np.ndarray) -> np.ndarray:
     for i, step in enumerate(invert_rigid(T)):
         G[i + 1] = G[i] @ step
     return G
+
+
+def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations → (N, 4) unit quaternions (x, y, z, w) with w ≥ 0.
+
+    Builds each quaternion from its largest component, which keeps the division well conditioned.
+    """
+    R = np.asarray(R, dtype=np.float64)
+    trace = np.trace(R, axis1=1, axis2=2)
+    # 4·q_k² for k = x, y, z, w; the largest is used as the pivot.
+    sq = np.stack([1 + 2 * R[:, 0, 0] - trace, 1 + 2 * R[:, 1, 1] - trace, 1 + 2 * R[:, 2, 2] - trace, 1 + trace], 1)
+    # Off-diagonal sums/differences: 4·q_i·q_j for the pairs (x,y), (x,z), (y,z), (w,x), (w,y), (w,z).
+    xy, xz, yz = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
+    wx, wy, wz = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
+    products = np.stack([  # row k: 4·q_k·(x, y, z, w)
+        np.stack([sq[:, 0], xy, xz, wx], 1),
+        np.stack([xy, sq[:, 1], yz, wy], 1),
+        np.stack([xz, yz, sq[:, 2], wz], 1),
+        np.stack([wx, wy, wz, sq[:, 3]], 1),
+    ], 1)
+    pivot = np.argmax(sq, axis=1)
+    q = products[np.arange(len(R)), pivot]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q * np.where(q[:, 3:] < 0, -1.0, 1.0)
+
+
+def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
+    """(N, 4) quaternions (x, y, z, w), normalised here → (N, 3, 3) rotations."""
+    x, y, z, w = (np.asarray(q, dtype=np.float64) / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], 1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], 1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], 1),
+    ], 1)
 
 
 def rotation_angle(R: np.ndarray) -> np.ndarray:

@@ -1,0 +1,104 @@
+"""Evaluation runs, the library behind ``evaluate-depth`` / ``evaluate-pose`` and the demo: a model's
+predictions (through the one prediction path of :mod:`posecons.inference.backend`) or saved ones →
+the metrics of :mod:`posecons.metrics` with their provenance → JSON, plots and trajectory files.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..data.kitti_raw import split_image_paths
+from ..data.splits import SplitLine, SplitSource
+from ..data.trajectory_io import write_kitti_poses, write_tum
+from ..errors import PoseconsError
+from ..inference.backend import Predictor, StepChain, predict_batches
+from ..inference.io import frames_from_paths
+from ..metrics.depth import CROP_FOR_GT_KIND, evaluate_depth
+from ..metrics.pose import align_trajectory, evaluate_pose
+from ..plots import plot_error_histogram, plot_scale_boxplot, plot_scale_over_time, plot_trajectory_topview
+
+
+def model_disparities(predictor: Predictor, data_path: str | Path, split: SplitSource, batch_size: int = 8,
+                      post_process: bool = False) -> np.ndarray:
+    """(N, h, w) float32 scaled disparities at network size of each split line's KITTI raw image."""
+    frames = frames_from_paths(split_image_paths(data_path, split))
+    batches = predict_batches(predictor, frames, batch_size, post_process=post_process)
+    return np.concatenate([disps[:, 0].float().cpu().numpy() for _, _, disps in batches])
+
+
+def model_steps(predictor: Predictor, paths: Sequence[Path], batch_size: int = 8) -> np.ndarray:
+    """(N−1, 4, 4) float64 relative poses T_{i+1←i} of N consecutive images from the pose net."""
+    if len(paths) < 2:
+        raise PoseconsError(f"pose evaluation needs at least 2 frames, got {len(paths)}")
+    chain = StepChain(predictor)
+    for _, images, _ in predict_batches(predictor, frames_from_paths(paths), batch_size, depth=False):
+        chain.add(images)
+    return chain.steps()
+
+
+def load_pred_disps(path: Path) -> np.ndarray:
+    """Disparities from a ``.npy`` file (no pickles)."""
+    if not path.is_file():
+        raise PoseconsError(f"{path}: predictions file not found")
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise PoseconsError(f"{path}: not a readable .npy array ({exc})") from None
+
+
+def depth_result(disps: np.ndarray, gts: Sequence[np.ndarray], lines: Sequence[SplitLine], scaling: str = "frame",
+                     gt_kind: str = "lidar", pred_name: str = "predictions", gt_name: str = "ground truth") -> dict:
+    """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
+    N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
+    added."""
+    result = evaluate_depth(disps, gts, [s.folder for s in lines], scaling=scaling, crop=CROP_FOR_GT_KIND[gt_kind],
+                            pred_name=pred_name, gt_name=gt_name)
+    result.update(gt_kind=gt_kind, predictions=pred_name, skipped_lines=[str(lines[i]) for i in result["skipped"]])
+    return result
+
+
+def pose_result(estimate: np.ndarray, gt: np.ndarray, const_velocity: str = "first",
+                    pred_name: str = "predictions", gt_name: str = "ground truth") -> dict:
+    """:func:`~posecons.metrics.pose.evaluate_pose` of (N, 4, 4) camera → world poses, with provenance."""
+    result = evaluate_pose(estimate, gt, const_velocity)
+    result.update(predictions=pred_name, ground_truth=gt_name)
+    return result
+
+
+def write_depth_plots(result: dict, lines: Sequence[SplitLine], out_dir: Path) -> None:
+    """Scale box plot, scale over time and abs rel histogram of a depth result into ``out_dir``."""
+    seqs, frames = [s.folder for s in lines], [s.frame for s in lines]
+    plot_scale_boxplot(result["scales"], seqs, out_dir / "scale_boxplot.png")
+    plot_scale_over_time(result["scales"], seqs, frames, out_dir / "scale_over_time.png")
+    plot_error_histogram(result["per_frame_abs_rel"], out_dir / "abs_rel_histogram.png")
+
+
+def write_trajectories(out_dir: Path, estimate: np.ndarray, gt: np.ndarray, times: np.ndarray | None = None) -> None:
+    """(N, 4, 4) estimate (KITTI and TUM), GT (TUM) and a top view of the Sim(3)-aligned estimate."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_kitti_poses(out_dir / "trajectory_kitti.txt", estimate)
+    write_tum(out_dir / "trajectory_tum.txt", estimate, times)
+    write_tum(out_dir / "gt_tum.txt", gt, times)
+    aligned, _ = align_trajectory(estimate, gt)
+    plot_trajectory_topview(aligned, out_dir / "trajectory.png", gt, "prediction (Sim(3)-aligned)")
+
+
+def write_json(path: Path, result: dict) -> None:
+    """JSON with NaN written as null (strict JSON readers reject NaN)."""
+    def clean(value):
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v) for v in value]
+        return value
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(clean(result), indent=2) + "\n")
+

@@ -1,0 +1,8 @@
+"""Core maths of evaluation, in numpy (as evo's ``core``): no file formats, no plots, no CLI.
+
+:mod:`.depth` — Eigen depth metrics, the KITTI protocol (Garg crop, median scaling), scale
+statistics (σ/μ, per-frame scales, drift); :mod:`.pose` — rigid-transform helpers and quaternions,
+Umeyama Sim(3) alignment, snippet ATE, full ATE / RPE and the constant-velocity baseline.
+Readers and writers of the files they work on live in :mod:`posecons.data`, figures in
+:mod:`posecons.plots`.
+"""

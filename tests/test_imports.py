@@ -1,0 +1,84 @@
+"""Layering: no module of the package imports (directly or through others) a module that imports it back.
+
+The graph is read from the source with ``ast``, including imports inside functions (a lazy import
+still ties two modules together). Importing ``posecons.a.b`` also runs ``posecons/a/__init__.py``,
+so that is an edge too, unless the package is an ancestor of the importer (already initialised).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(SRC).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph() -> dict[str, set[str]]:
+    files = {_module_name(p): p for p in (SRC / "posecons").rglob("*.py")}
+    graph: dict[str, set[str]] = {name: set() for name in files}
+    for name, path in files.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(anchor + ([base] if base else []))
+                # `from pkg import sub` imports the submodule pkg.sub when there is one
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in files else base for a in node.names]
+            else:
+                continue
+            for target in targets:
+                parts = target.split(".")
+                for i in range(1, len(parts) + 1):
+                    module = ".".join(parts[:i])
+                    is_ancestor = name == module or name.startswith(module + ".")
+                    if module in files and not is_ancestor:
+                        graph[name].add(module)
+    return graph
+
+
+def _find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        path.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            if nxt not in state and (cycle := visit(nxt)):
+                return cycle
+        state[node] = 2
+        path.pop()
+        return None
+
+    for start in sorted(graph):
+        if start not in state and (cycle := visit(start)):
+            return cycle
+    return None
+
+
+def test_the_graph_sees_the_package():
+    graph = _import_graph()
+    assert "posecons.training.demo" in graph and "posecons.config" in graph["posecons.training.demo"]
+    assert "posecons.inference.backend" in graph["posecons.evaluation.evaluate"]
+
+
+def test_no_module_imports_one_that_imports_it_back():
+    cycle = _find_cycle(_import_graph())
+    assert cycle is None, "import cycle: " + " → ".join(cycle)
+
+
+def test_core_maths_import_no_file_formats_plots_or_commands():
+    graph = _import_graph()
+    for core in ("posecons.metrics.depth", "posecons.metrics.pose", "posecons.geometry"):
+        assert graph[core] <= {"posecons.errors"}, (core, graph[core])

@@ -1,0 +1,29 @@
+"""Every figure of posecons.plots is written as a PNG from small inputs; colorize maps to uint8 RGB."""
+
+import numpy as np
+
+from posecons import plots
+
+
+def test_every_figure_is_written(tmp_path):
+    scales = [1.0, 1.1, np.nan, 0.9, 1.2, 1.05]
+    seqs = ["2011_09_26/2011_09_26_drive_0002_sync"] * 3 + ["b"] * 3
+    poses = np.tile(np.eye(4), (5, 1, 1))
+    poses[:, 2, 3] = np.arange(5)
+    rows = [{"step": s, "val_photometric": 0.2 - 0.01 * s, "abs_rel": 0.4 - 0.02 * s} for s in (1, 2, 3)]
+    written = [
+        plots.plot_scale_boxplot(scales, seqs, tmp_path / "a" / "box.png"),  # creates the folder
+        plots.plot_scale_over_time(scales, seqs, [0, 1, 2, 0, 1, 2], tmp_path / "time.png"),
+        plots.plot_error_histogram([0.1, 0.2, np.nan, 0.15], tmp_path / "hist.png"),
+        plots.plot_trajectory_topview(poses, tmp_path / "traj.png"),
+        plots.plot_trajectory_topview(poses, tmp_path / "traj_gt.png", gt=poses, label="aligned"),
+        plots.plot_validation(rows, tmp_path / "val.png"),
+        plots.plot_scale_drift(np.arange(4), np.array([1.0, 1.1, 0.9, 1.0]), 1.0, np.arange(2), tmp_path / "drift.png"),
+    ]
+    assert all(path.stat().st_size > 1000 for path in written)
+
+
+def test_colorize_gives_rgb_bytes_of_the_same_size():
+    color = plots.colorize(np.linspace(0.01, 1.0, 12).reshape(3, 4))
+    assert color.shape == (3, 4, 3) and color.dtype == np.uint8
+    assert not np.array_equal(color[0, 0], color[-1, -1])  # near and far get different colours
