@@ -16,6 +16,7 @@ import time
 import torch
 
 from posecons.config import load_config
+from posecons.data.augment import jitter_batch
 from posecons.model import PoseConsModel
 
 VARIANTS = {"baseline": [], "fb": ["fb"], "id": ["id"], "cyc": ["cyc"], "all": ["fb", "id", "cyc"]}
@@ -40,7 +41,7 @@ def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
         start = time.perf_counter()
         optim.zero_grad(set_to_none=True)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16):
-            _, losses = model(batch, step=i)
+            _, losses = model(jitter_batch(batch), step=i)
         losses["total"].backward()
         optim.step()
         if device.type == "cuda":

@@ -74,8 +74,8 @@ def test_forward_backward_zero_for_exact_inverse():
 
 def test_cycle_zero_for_exact_composition():
     first, second = poses(), poses()
-    assert cycle_loss(second @ first, first, second).item() == pytest.approx(0, abs=1e-9)
-    assert cycle_loss(first @ second, first, second).item() > 1e-3  # wrong order composes wrong poses
+    assert cycle_loss(second @ first, second, first).item() == pytest.approx(0, abs=1e-9)
+    assert cycle_loss(first @ second, second, first).item() > 1e-3  # wrong order composes wrong poses
 
 
 def test_identity_loss():

@@ -57,6 +57,13 @@ class ConstantDepth(nn.Module):
         return {s: torch.full((b, 1, h // 2 ** s, w // 2 ** s), self.value) for s in range(4)}
 
 
+class ForwardMotion(nn.Module):
+    """A pose net that ignores its input: 1 cm forward for every pair."""
+
+    def forward(self, a, b, groups=1, tracked=None):
+        return torch.zeros(len(a), 1, 3), torch.tensor([0.0, 0.0, 0.01]).expand(len(a), 1, 3)
+
+
 def log_rotation(R: torch.Tensor) -> torch.Tensor:
     """(3, 3) float64 rotation (angle < π) → axis-angle (3,)."""
     w = torch.stack([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
@@ -176,7 +183,7 @@ def test_rotating_trajectory_gives_true_poses_and_zero_constraints():
     T = {f: outputs["poses"][f].double() for f in (-1, 1)}  # T_{f←0}
     skip = (torch.linalg.inv(world[1]) @ world[-1]).expand(2, 4, 4)
     first, second = torch.linalg.inv(T[-1]), T[1]  # T_{0←−1}, T_{+1←0}
-    assert cycle_loss(skip, first, second) < 1e-5 < 1e-2 < cycle_loss(skip, second, first)
+    assert cycle_loss(skip, second, first) < 1e-5 < 1e-2 < cycle_loss(skip, first, second)
 
 
 def test_predict_pose_and_pose_evaluation_share_the_training_pair_order(tmp_path):
@@ -200,3 +207,27 @@ def test_predict_pose_and_pose_evaluation_share_the_training_pair_order(tmp_path
     steps = model_steps(TorchPredictor(model, "fake"), paths, batch_size=2)  # evaluate-pose's path
     assert steps.shape == (4, 4, 4)
     assert torch.allclose(torch.from_numpy(steps), true_steps, atol=1e-5)
+
+
+def test_networks_see_net_frames_and_losses_the_unaugmented_frames():
+    from posecons.data.augment import jitter_batch
+
+    batch = random_batch(b=2)
+    batch["color_aug"] = torch.tensor([[1.2, 0.8, 1.1, 0.05], [0.9, 1.1, 0.85, -0.05]])
+    jittered = jitter_batch(batch)
+    assert torch.equal(jittered["frames"], batch["frames"]) and not torch.equal(jittered["net_frames"], batch["frames"])
+    model = PoseConsModel(make_config())
+    seen = []
+    model.depth_net.encoder.register_forward_hook(lambda mod, inp, out: seen.append(inp[0]))
+    model.pose_net.encoder.register_forward_hook(lambda mod, inp, out: seen.append(inp[0]))
+    model.eval()  # fixed BatchNorm statistics: outputs depend on the inputs alone
+    _, losses = model(jittered)
+    assert torch.equal(seen[0], jittered["net_frames"][:, 0])
+    net = jittered["net_frames"]
+    assert torch.equal(seen[1][:2], torch.cat([net[:, 1], net[:, 0]], 1))  # the pair (I_−1, I_0), jittered
+    # The same network outputs with un-augmented targets give the same losses: they use `frames`.
+    model.depth_net = ConstantDepth(0.3)
+    model.pose_net = ForwardMotion()
+    _, plain = model(batch)
+    _, augmented = model(jittered)
+    assert torch.equal(plain["photometric"], augmented["photometric"])

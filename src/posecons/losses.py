@@ -87,11 +87,12 @@ def identity_loss(axisangle: torch.Tensor, translation: torch.Tensor) -> torch.T
     return (axisangle.abs().sum((1, 2)) + translation.abs().sum((1, 2))).mean()
 
 
-def cycle_loss(t_skip: torch.Tensor, t_first: torch.Tensor, t_second: torch.Tensor,
+def cycle_loss(t_skip: torch.Tensor, t_second: torch.Tensor, t_first: torch.Tensor,
                translation_norm: str = "sum") -> torch.Tensor:
     """mean d(T_{+1←−1}, T_{+1←0} · T_{0←−1}): the skip pose must equal the composed pair.
 
-    t_skip: T_{+1←−1}; t_first: T_{0←−1}; t_second: T_{+1←0}; each (B, 4, 4).
+    Arguments in the formula's reading order: t_skip T_{+1←−1}, t_second T_{+1←0}, t_first
+    T_{0←−1}; each (B, 4, 4).
     """
     check_tensor("t_second", t_second, (None, 4, 4))
     check_tensor("t_first", t_first, tuple(t_second.shape))

@@ -6,8 +6,8 @@ which takes a batch dict and returns predictions and a dict of named losses.
 Batch keys (see ``posecons.data``):
     frames      (B, F, 3, H, W) un-augmented RGB in [0, 1], in the order of ``model.frame_ids``
     intrinsics  (B, 3, 3) normalised K (row 0 / W, row 1 / H)
-    color_aug   (B, 4) optional colour-jitter factors; the networks see jittered frames,
-                the losses the un-augmented ones (SPEC §6)
+    net_frames  (B, F, 3, H, W) optional: what the networks see, e.g. colour-jittered by
+                :func:`posecons.data.augment.jitter_batch`; the losses always use ``frames`` (SPEC §6)
 """
 
 from __future__ import annotations
@@ -21,6 +21,32 @@ from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrin
 from .losses import (cycle_loss, forward_backward_loss, identity_loss, min_reprojection,
                      photometric_error, smoothness_loss)
 from .networks import DepthNet, PoseNet, imagenet_weights_name, load_imagenet_state
+
+
+class PairPoses:
+    """The pose net's outputs of one step, by input pair: the frame pair (a, b) gave T_{b←a}.
+
+    ``vector(a, b)``: the raw 6-vector, axis-angle and translation, each (B, 1, 3).
+    ``T(dst, src, input)``: T_{dst←src} (B, 4, 4) from the output for the input pair ``input`` —
+    that output when ``input == (src, dst)``, its inverse [Rᵀ | −Rᵀt] when ``input == (dst, src)``.
+    """
+
+    def __init__(self, pairs: list[tuple[int, int]], axisangle: torch.Tensor, translation: torch.Tensor):
+        chunks = zip(axisangle.float().chunk(len(pairs)), translation.float().chunk(len(pairs)))
+        self.vectors = dict(zip(pairs, chunks))
+
+    def vector(self, a: int, b: int) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.vectors[(a, b)]
+
+    def T(self, dst: int, src: int, input: tuple[int, int]) -> torch.Tensor:
+        if tuple(input) not in ((src, dst), (dst, src)):
+            raise ValueError(f"the input pair {input} does not relate frames {src} and {dst}")
+        return pose_vec_to_mat(*self.vectors[tuple(input)], invert=tuple(input) == (dst, src))
+
+
+def temporal(f: int) -> tuple[int, int]:
+    """The pose-net input pair for source f in temporal order (SPEC §1): (f, 0) if f < 0, else (0, f)."""
+    return (min(f, 0), max(f, 0))
 
 
 class PoseConsModel(nn.Module):
@@ -56,20 +82,17 @@ class PoseConsModel(nn.Module):
             active.append("id")
         return active
 
-    def pose_pairs(self, constraints: list[str]) -> list[tuple[str, int, int]]:
-        """(role, a, b) frame-id pairs the pose net must see this step; a pair gives T_{b←a}.
-
-        Sources are fed in temporal order (SPEC §1); fb adds each reversed pair, id (0, 0),
-        cyc (−n, +n).
-        """
+    def pose_pairs(self, constraints: list[str]) -> list[tuple[int, int]]:
+        """The frame pairs (a, b) the pose net sees this step, temporal pairs first (they alone
+        update BatchNorm's running statistics): fb adds each reversed pair, id (0, 0), cyc (−n, +n)."""
         sources = self.config.model.frame_ids[1:]
-        pairs = [("pose", min(f, 0), max(f, 0)) for f in sources]
+        pairs = [temporal(f) for f in sources]
         if "fb" in constraints:
-            pairs += [("reverse", max(f, 0), min(f, 0)) for f in sources]
+            pairs += [temporal(f)[::-1] for f in sources]
         if "id" in constraints:
-            pairs.append(("id", 0, 0))
+            pairs.append((0, 0))
         if "cyc" in constraints:
-            pairs.append(("cyc", *self.cycle_ids()))
+            pairs.append(self.cycle_ids())
         return pairs
 
     def cycle_ids(self) -> tuple[int, int]:
@@ -79,55 +102,47 @@ class PoseConsModel(nn.Module):
 
     def forward(self, batch: dict, step: int = 0) -> tuple[dict, dict[str, torch.Tensor]]:
         m, lo = self.config.model, self.config.loss
-        frames = check_tensor("batch['frames']", batch["frames"], (None, len(m.frame_ids), 3, m.height, m.width))
+        shape = (None, len(m.frame_ids), 3, m.height, m.width)
+        frames = check_tensor("batch['frames']", batch["frames"], shape)
+        net_frames = check_tensor("batch['net_frames']", batch.get("net_frames", frames), tuple(frames.shape))
         K = check_tensor("batch['intrinsics']", batch["intrinsics"], (frames.shape[0], 3, 3)).float()
-        net_frames = frames
-        if "color_aug" in batch:
-            from .data.augment import color_jitter
-            net_frames = color_jitter(frames, batch["color_aug"])
         index = {f: i for i, f in enumerate(m.frame_ids)}
 
         disps = self.depth_net(net_frames[:, 0])
 
-        # Every pose-net input of this step in one batched pass, normalised per pair group; the
-        # temporal pairs (listed first) alone update the running statistics.
+        # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group.
         constraints = self.active_constraints(step)
         pairs = self.pose_pairs(constraints)
-        a = torch.cat([net_frames[:, index[p[1]]] for p in pairs])
-        b = torch.cat([net_frames[:, index[p[2]]] for p in pairs])
-        aa_all, t_all = self.pose_net(a, b, groups=len(pairs), tracked=len(m.frame_ids) - 1)
+        a = torch.cat([net_frames[:, index[i]] for i, _ in pairs])
+        b = torch.cat([net_frames[:, index[j]] for _, j in pairs])
+        P = PairPoses(pairs, *self.pose_net(a, b, groups=len(pairs), tracked=len(m.frame_ids) - 1))
+
         with torch.autocast(frames.device.type, enabled=False):
-            raw = {p: (aa, t) for p, aa, t in zip(pairs, aa_all.float().chunk(len(pairs)),
-                                                  t_all.float().chunk(len(pairs)))}
-
-            def mat(role: str, a: int, b: int, invert: bool = False) -> torch.Tensor:
-                return pose_vec_to_mat(*raw[(role, a, b)], invert=invert)
-
             sources = m.frame_ids[1:]
-            # T_{f←0} for warping: the temporal pair gives T_{0←f} when f < 0, so invert it.
-            poses = {f: mat("pose", min(f, 0), max(f, 0), invert=f < 0) for f in sources}
-            losses = self._view_synthesis_losses(frames.float(), K, disps, poses)
+            poses = {f: P.T(f, 0, input=temporal(f)) for f in sources}  # T_{f←0}, for warping
+            losses, automask = self._view_synthesis_losses(frames.float(), K, disps, poses)
+            # The paper's constraints (SPEC §5), each in the reading order of its equation.
+            if "fb" in constraints:  # d(T_{f←0}, inverse(T_{0←f} from the reversed pair)) for each source
+                losses["fb"] = forward_backward_loss(torch.cat([poses[f] for f in sources]),
+                                                     torch.cat([P.T(0, f, input=temporal(f)[::-1]) for f in sources]),
+                                                     lo.translation_norm)
+            if "id" in constraints:  # ‖e‖₁ + ‖t‖₁ of pose(I_0, I_0)
+                losses["id"] = identity_loss(*P.vector(0, 0))
+            if "cyc" in constraints:  # d(T_{+n←−n}, T_{+n←0} · T_{0←−n})
+                prev, nxt = self.cycle_ids()
+                losses["cyc"] = cycle_loss(P.T(nxt, prev, input=(prev, nxt)), P.T(nxt, 0, input=temporal(nxt)),
+                                           P.T(0, prev, input=temporal(prev)), lo.translation_norm)
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
-            for name in constraints:
-                if name == "fb":  # T_{0←f} from each reversed pair against T_{f←0}
-                    t_bwd = torch.cat([mat("reverse", max(f, 0), min(f, 0), invert=f < 0) for f in sources])
-                    losses["fb"] = forward_backward_loss(torch.cat([poses[f] for f in sources]), t_bwd,
-                                                         lo.translation_norm)
-                elif name == "id":
-                    losses["id"] = identity_loss(*raw[("id", 0, 0)])
-                else:  # T_{+n←−n} against T_{+n←0} · T_{0←−n}
-                    prev, nxt = self.cycle_ids()
-                    losses["cyc"] = cycle_loss(mat("cyc", prev, nxt), mat("pose", prev, 0), mat("pose", 0, nxt),
-                                               lo.translation_norm)
-                losses["total"] = losses["total"] + weights[name] * losses[name]
+            losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in constraints)
 
         outputs = {"disp": disps, "poses": poses, "depth": disp_to_depth(disps[0], m.min_depth, m.max_depth)[1],
-                   "automask": losses.pop("_automask")}
+                   "automask": automask}
         return outputs, losses
 
     def _view_synthesis_losses(self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict,
-                               poses: dict[int, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """Min-reprojection with auto-masking plus smoothness, averaged over scales (SPEC §3–4)."""
+                               poses: dict[int, torch.Tensor]) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """Min-reprojection with auto-masking plus smoothness, averaged over scales (SPEC §3–4);
+        also the full-scale auto-mask (B, H, W), True where a warped source won."""
         m, lo = self.config.model, self.config.loss
         h, w = m.height, m.width
         target, sources = frames[:, 0], [frames[:, i] for i in range(1, frames.shape[1])]
@@ -153,8 +168,7 @@ class PoseConsModel(nn.Module):
             smooth.append(lo.smoothness_weight / 2 ** s * smoothness_loss(disps[s].float(), _resize(target, hs, ws)))
         photometric = torch.stack(photo).mean()
         smoothness = torch.stack(smooth).mean()
-        return {"photometric": photometric, "smoothness": smoothness, "total": photometric + smoothness,
-                "_automask": automask}
+        return {"photometric": photometric, "smoothness": smoothness, "total": photometric + smoothness}, automask
 
 
 def _resize(image: torch.Tensor, height: int, width: int) -> torch.Tensor:

@@ -2,7 +2,8 @@
 
 The dataset only *draws* the parameters (flip and four jitter factors) from a generator seeded by
 (seed, epoch, index), so a resumed run sees bit-identical augmentation whatever the worker layout.
-The model applies :func:`color_jitter` to whole batches on its device (SPEC §6).
+:func:`jitter_batch` applies the colour jitter to whole batches on their device, before the model
+(SPEC §6).
 """
 
 from __future__ import annotations
@@ -44,3 +45,11 @@ def color_jitter(frames: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
         x = TF.adjust_saturation(x, saturation)
         out[b] = TF.adjust_hue(x, hue)
     return out
+
+
+def jitter_batch(batch: dict) -> dict:
+    """The batch plus ``net_frames``: its frames jittered by their ``color_aug`` factors, on the
+    batch's device. The networks see ``net_frames``; the losses keep the un-augmented ``frames``."""
+    if "color_aug" not in batch:
+        return batch
+    return {**batch, "net_frames": color_jitter(batch["frames"], batch["color_aug"])}

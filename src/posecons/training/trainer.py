@@ -38,6 +38,7 @@ from tqdm import tqdm
 
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
+from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..errors import PoseconsError
 from ..model import PoseConsModel
@@ -274,7 +275,8 @@ class Trainer:
         and the model outputs, which the image log reuses.
         """
         t = self.config.train
-        batch = {k: v.to(self.device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+        batch = jitter_batch({k: v.to(self.device, non_blocking=True) if torch.is_tensor(v) else v
+                              for k, v in batch.items()})
         sync = last or self.env.world == 1
         context = self.ddp.no_sync() if not sync and hasattr(self.ddp, "no_sync") else contextlib.nullcontext()
         with context:
