@@ -8,6 +8,7 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
+from ..fileio import atomic_write
 from .calib import calib_matrix, normalised_k, read_calib_file
 from .frames import FrameDataset
 from .io import require_file
@@ -47,7 +48,8 @@ def read_poses(path: Path) -> np.ndarray:
 
 def write_poses(path: Path, poses: np.ndarray) -> None:
     """Write (N, 4, 4) poses in the KITTI format (first 3 rows, row-major, 12 numbers a line)."""
-    np.savetxt(path, np.asarray(poses)[:, :3, :].reshape(-1, 12), fmt="%.9e")
+    rows = np.asarray(poses)[:, :3, :].reshape(-1, 12)
+    atomic_write(path, lambda tmp: np.savetxt(tmp, rows, fmt="%.9e"))
 
 
 def list_sequence_frames(data_path: Path, sequence: int | str, side: str = "l", img_ext: str = ".png") -> list[Path]:

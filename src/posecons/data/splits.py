@@ -13,7 +13,8 @@ from pathlib import Path
 from typing import Union
 
 from ..errors import PoseconsError
-from .io import atomic_file, require_file
+from ..fileio import write_text
+from .io import require_file
 
 SIDES = ("l", "r")
 SIDE_TO_CAMERA = {"l": 2, "r": 3}  # left / right colour camera
@@ -68,8 +69,7 @@ def read_split(source: SplitSource) -> list[SplitLine]:
 def write_split(path: Path, lines: Iterable[SplitLine], frame_digits: int = 0) -> None:
     """Write split lines; ``frame_digits=10`` gives the eigen test style (``0000000069``)."""
     text = "".join(f"{s.folder} {s.frame:0{frame_digits}d} {s.side}\n" for s in lines)
-    with atomic_file(Path(path)) as tmp:
-        tmp.write_text(text)
+    write_text(path, text)
 
 
 def read_static_frames(path: Path) -> set[tuple[str, int]]:

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..data.kitti_odometry import read_poses, write_poses
 from ..errors import PoseconsError
+from ..fileio import atomic_write
 
 write_kitti_poses = write_poses  # the data layer's KITTI writer (12 numbers a line)
 
@@ -95,7 +96,7 @@ def write_tum(path: str | Path, poses: np.ndarray, timestamps: np.ndarray | None
     if len(timestamps) != len(poses):
         raise PoseconsError(f"{len(timestamps)} timestamps for {len(poses)} poses")
     rows = np.column_stack([timestamps, poses[:, :3, 3], rotation_to_quaternion(poses[:, :3, :3])])
-    np.savetxt(path, rows, fmt="%.9f")
+    atomic_write(path, lambda tmp: np.savetxt(tmp, rows, fmt="%.9f"))
 
 
 def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

@@ -10,6 +10,8 @@ matplotlib.use("Agg")  # files only; never needs a display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..fileio import atomic_write  # noqa: E402
+
 COLORMAP = "magma"
 
 
@@ -33,7 +35,7 @@ def plot_scale_drift(indices: np.ndarray, scales: np.ndarray, scale: float, cali
     ax.set_ylabel("scale")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
     plt.close(fig)
 
 
@@ -47,5 +49,5 @@ def plot_topview(poses: np.ndarray, path: Path) -> None:
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
     plt.close(fig)

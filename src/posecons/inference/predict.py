@@ -4,7 +4,7 @@ Frames stream through in batches: each is resized to the network size, its dispa
 bilinearly back to the original size and inverted, and the sequence's single scale is applied.
 Scale calibration (if any) runs first over the first frames only, then the main pass writes
 everything into a staging folder inside OUT that is moved into place at the end (see
-:func:`posecons.inference.io.staged_output`).
+:func:`posecons.fileio.output_dir`).
 
 Output layout (``<name>`` is the image stem, or the 6-digit frame index of a video)::
 
@@ -38,7 +38,8 @@ from . import scale as scaling
 from .backend import Predictor
 from .camera import normalised_to_pixel, resolve_intrinsics
 from ..data.io import resize_rgb
-from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, staged_output
+from ..fileio import output_dir
+from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter
 from .plots import colorize, plot_scale_drift, plot_topview
 from .pointcloud import depth_to_points, write_ply
 
@@ -153,7 +154,7 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
     s = result.value
     fps = source.video_fps if source.is_video else options.fps
 
-    with staged_output(Path(out)) as tmp:
+    with output_dir(out) as tmp:
         folders = ["depth", "depth_png", "depth_color"] + (["pointcloud"] if options.pointcloud else [])
         for name in folders:
             (tmp / name).mkdir()

@@ -21,6 +21,7 @@ from ..checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from ..cli import main as cli  # noqa: E402
 from ..config import load_config  # noqa: E402
 from ..errors import PoseconsError  # noqa: E402
+from ..fileio import atomic_write, write_json, write_text  # noqa: E402
 from ..model import PoseConsModel  # noqa: E402
 from .commands import resolve_preset  # noqa: E402
 from .trainer import train  # noqa: E402
@@ -55,7 +56,7 @@ def _plot_validation(metrics_file: Path, path: Path) -> Path | None:
     ax.legend(handles=handles, loc="upper right")
     ax.set_title("validation during training")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
     plt.close(fig)
     return path
 
@@ -116,8 +117,8 @@ def run_demo(out: Path, seed: int = 0, synth_args: list[str] = SYNTH_ARGS, overr
         "checkpoint_step": ckpt_step, "train_minutes": train_minutes, "minutes": (time.time() - start) / 60,
         "config": config.to_dict(),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "report.md").write_text(_report(summary, depth, before, pose, odom_seq, meta))
+    write_json(out / "summary.json", summary)
+    write_text(out / "report.md", _report(summary, depth, before, pose, odom_seq, meta))
     return summary
 
 

@@ -19,7 +19,6 @@ resumed ends with the same weights as an uninterrupted one (in deterministic mod
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
 import random
@@ -38,6 +37,7 @@ from tqdm import tqdm
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
 from ..errors import PoseconsError
+from ..fileio import write_json, write_text
 from ..model import PoseConsModel
 from .data import build_dataset, split_files
 from .validation import Validator
@@ -116,7 +116,7 @@ class Trainer:
         if resume:
             self._load(self.out / "checkpoints" / "last.pt")
         elif self.env.main:
-            (self.out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
+            write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         self.writer = None
         if self.env.main:
             from torch.utils.tensorboard import SummaryWriter
@@ -330,7 +330,7 @@ def train(config: Config, data_path: str | Path, out: str | Path, split_dir: str
     trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
     summary = trainer.fit()
     if trainer.env.main:
-        (Path(out) / "train_summary.json").write_text(json.dumps(summary, indent=2))
+        write_json(Path(out) / "train_summary.json", summary)
     if dist.is_initialized():
         dist.barrier()
         dist.destroy_process_group()

@@ -28,7 +28,7 @@ from PIL import Image
 
 from ...errors import PoseconsError
 from ..calib import format_calib
-from ..io import atomic_dir
+from ...fileio import output_dir
 from ..kitti_odometry import write_poses
 from ..oxts import DATAFORMAT, format_oxts, poses_to_oxts
 from ..splits import SplitLine, write_split
@@ -181,7 +181,7 @@ def generate_synth(
     test_ids = list(range(drives - n_test, drives))
     rng = np.random.default_rng([seed, 2_000_003])
     train_lines, test_lines, static = [], [], {}
-    with atomic_dir(Path(out)) as tmp:
+    with output_dir(out) as tmp:
         date_dir, odometry = tmp / DATE, tmp / "odometry"
         date_dir.mkdir()
         (date_dir / "calib_cam_to_cam.txt").write_text(format_calib(rig.cam_to_cam_text()))
