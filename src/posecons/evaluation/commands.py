@@ -4,15 +4,14 @@ files, call the library functions of this package and write JSON / plots / traje
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import PoseconsError
-from . import compare, depth, plots, pose, trajectory_io
+from ..fileio import atomic_write, write_json, write_text
+from . import depth, pose  # light (numpy); plots, torch and the data layer load inside the commands
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,9 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "with --checkpoint it is exported on the fly when missing)")
     p.add_argument("--data-path", type=Path, help="KITTI raw root (with --checkpoint)")
     p.add_argument("--split-file", type=Path, help="split lines; gives the sequences (default: the GT's lines)")
-    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame", help="median scaling (default: frame)")
+    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame", help="median scaling per frame, per sequence, or none")
     p.add_argument("--gt-kind", choices=tuple(depth.CROP_FOR_GT_KIND), default="lidar",
-                   help="lidar: Garg crop, 1e-3 < gt < 80; improved: gt > 0, no crop (default: lidar)")
+                   help="lidar: Garg crop, 1e-3 < gt < 80 m; improved: gt > 0, no crop")
     p.add_argument("--post-process", action="store_true", help="average with the flipped image's prediction")
     p.add_argument("--save-disps", type=Path, metavar="OUT.npy", help="save the model's disparities")
     _add_model_options(p)
@@ -45,9 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--gt-poses", type=Path, required=True, metavar="G.txt", help="KITTI ground-truth pose file")
     p.add_argument("--data-path", type=Path, help="KITTI odometry root with sequences/ (with --checkpoint)")
     p.add_argument("--sequence", help="odometry sequence, e.g. 09 (with --checkpoint)")
-    p.add_argument("--times", type=Path, help="times.txt for the TUM timestamps (default: frame / 10 Hz)")
+    p.add_argument("--times", type=Path, help="times.txt (seconds) for the TUM timestamps (default: frame / 10 Hz)")
     p.add_argument("--const-velocity", choices=pose.CONST_VELOCITY_MODES, default="first",
-                   help="baseline: repeat the first GT step, or the previous GT step (default: first)")
+                   help="baseline: repeat the first GT step, or the previous GT step")
     _add_model_options(p)
     p.add_argument("--json", type=Path, metavar="OUT", help="write the results as JSON")
     p.add_argument("--out-dir", type=Path, metavar="DIR", help="write trajectories (KITTI, TUM) and a top-view plot")
@@ -83,21 +82,6 @@ def _load_model(args: argparse.Namespace):
     return model, config, device
 
 
-def write_json(path: Path, result: dict) -> None:
-    """JSON with NaN written as null (strict JSON readers reject NaN)."""
-    def clean(value):
-        if isinstance(value, float) and not math.isfinite(value):
-            return None
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [clean(v) for v in value]
-        return value
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(clean(result), indent=2) + "\n")
-
-
 def load_pred_disps(path: Path) -> np.ndarray:
     """Disparities from a ``.npy`` file (no pickles)."""
     if not path.is_file():
@@ -122,6 +106,7 @@ def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray]
 
 def evaluate_depth_command(args: argparse.Namespace) -> int:
     from ..data.splits import read_split
+    from . import compare, plots
 
     if args.checkpoint is None and args.gt is None:
         raise PoseconsError("--pred-disps needs --gt (an exported ground-truth .npz)")
@@ -138,7 +123,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
                                     config.model.width, args.batch_size, args.post_process, device)
         pred_name = str(args.checkpoint)
         if args.save_disps:
-            np.save(args.save_disps, disps)
+            atomic_write(args.save_disps, lambda tmp: np.save(tmp, disps))
     else:
         disps, pred_name = load_pred_disps(args.pred_disps), str(args.pred_disps)
     if len(split) != len(gts):
@@ -165,6 +150,8 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_pose_command(args: argparse.Namespace) -> int:
+    from . import plots, trajectory_io
+
     gt = trajectory_io.read_kitti_poses(args.gt_poses)
     times = trajectory_io.read_times(args.times) if args.times else None
     if times is not None and len(times) != len(gt):
@@ -194,7 +181,6 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, result)
     if args.out_dir:
-        args.out_dir.mkdir(parents=True, exist_ok=True)
         trajectory_io.write_kitti_poses(args.out_dir / "trajectory_kitti.txt", estimate)
         trajectory_io.write_tum(args.out_dir / "trajectory_tum.txt", estimate, times)
         trajectory_io.write_tum(args.out_dir / "gt_tum.txt", gt, times)
@@ -204,11 +190,12 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
 
 
 def compare_command(args: argparse.Namespace) -> int:
+    from . import compare
+
     results = [compare.load_result(path) for path in args.results]
     names = args.names or [compare.default_name(path) for path in args.results]
     table = compare.markdown_table(results, names)
     print(table, end="")
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(table)
+        write_text(args.out, table)
     return 0
