@@ -99,7 +99,8 @@ class Trainer:
         if len(self.train_set) < t.batch_size * self.env.world:
             raise PoseconsError(f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
                                 f"({t.batch_size} × {self.env.world} processes)")
-        self.validator = Validator(config, data_path, val_file, self.out, self.device) if val_file else None
+        self.validator = (Validator(config, data_path, val_file, self.out, self.device)
+                          if val_file and t.val_every != "off" else None)
 
         model = PoseConsModel(config).to(self.device)
         if t.sync_bn and self.env.world > 1:
@@ -201,6 +202,12 @@ class Trainer:
         dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(precision)
         return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None and self.device.type == "cuda")
 
+    @property
+    def _val_steps(self) -> int:
+        """Steps between validations; 0 when validation is per epoch or off."""
+        every = self.config.train.val_every
+        return every if isinstance(every, int) else 0
+
     def total_steps(self) -> int:
         t = self.config.train
         full = self.steps_per_epoch * t.epochs
@@ -225,7 +232,7 @@ class Trainer:
                 if losses is not None:
                     bar.set_postfix({k: f"{v:.3g}" for k, v in losses.items()}, refresh=False)
                     self._log(losses, batch, outputs)
-                if t.val_every and self.step % t.val_every == 0:
+                if self._val_steps and self.step % self._val_steps == 0:
                     last_metrics = self.validate()
                 if t.checkpoint_every and self.step % t.checkpoint_every == 0:
                     self.save()
@@ -235,12 +242,12 @@ class Trainer:
                 self.epoch += 1
                 self.batch_in_epoch = 0
                 self.scheduler.step()
-                if not t.val_every:
+                if t.val_every == "epoch":
                     last_metrics = self.validate()
                 self._save_epoch()
             self.save()
         bar.close()
-        if t.val_every and self.step % t.val_every:
+        if self._val_steps and self.step % self._val_steps:
             last_metrics = self.validate()
         summary = {"steps": self.step, "epochs": self.epoch, "skipped_steps": self.skipped_steps,
                    "minutes": (time.time() - start) / 60, "last_validation": last_metrics}
