@@ -35,10 +35,14 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
             warnings.simplefilter("ignore", UserWarning)
             state = torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
-        raise PoseconsError(f"{path}: refused to load — it holds objects other than weights and plain "
-                            f"data (not a posecons checkpoint, or unsafe): {str(exc).splitlines()[0]}") from exc
-    except (RuntimeError, EOFError, OSError) as exc:
-        raise PoseconsError(f"{path}: not a readable checkpoint ({exc})") from exc
+        unsafe = [line.strip() for line in str(exc).splitlines() if "GLOBAL" in line]  # a blocked import
+        if unsafe:
+            raise PoseconsError(f"{path}: refused to load — it holds objects other than weights and plain "
+                                f"data (not a posecons checkpoint, or unsafe): {unsafe[0]}") from exc
+        raise PoseconsError(f"{path}: not a readable checkpoint (damaged, or not written by torch.save)") from exc
+    except Exception as exc:  # damaged bytes surface as almost any error type inside torch.load
+        raise PoseconsError(f"{path}: not a readable checkpoint (damaged, or not written by torch.save: "
+                            f"{type(exc).__name__})") from exc
     if not isinstance(state, dict) or "config" not in state or "model" not in state:
         raise PoseconsError(f"{path}: not a posecons checkpoint (no 'config' and 'model' entries)")
     return state

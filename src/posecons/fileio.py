@@ -42,6 +42,20 @@ def make_dirs(path: str | Path) -> list[Path]:
     return missing
 
 
+def check_writable(path: str | Path, folder: bool = False) -> Path:
+    """Fail before the work, not after it, when ``path`` (a file, or a ``folder``) cannot be written:
+    it is of the other kind, or its nearest existing parent is a file or not writable."""
+    path = Path(path)
+    if path.exists() and path.is_dir() != folder:
+        raise PoseconsError(f"{path}: exists and is {'not a folder' if folder else 'a folder; give a file name'}")
+    anchor = path if folder and path.exists() else next(p for p in path.parents if p.exists())
+    if not anchor.is_dir():
+        raise PoseconsError(f"{path}: cannot be created, {anchor} is a file")
+    if not os.access(anchor, os.W_OK | os.X_OK):
+        raise PoseconsError(f"{path}: no permission to write in {anchor}")
+    return path
+
+
 def remove_empty(folders: list[Path]) -> None:
     """Remove ``folders`` (innermost first) that are still empty: undo :func:`make_dirs` after a failure."""
     for folder in reversed(folders):

@@ -14,8 +14,8 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-from .calib import raw_projection, velo_to_image
 from ..fileio import atomic_file
+from .calib import raw_projection, velo_to_image
 from .io import load_velodyne, require_file
 from .splits import SIDE_TO_CAMERA as CAMERA
 from .splits import SplitSource, read_split

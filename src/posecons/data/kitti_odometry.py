@@ -40,6 +40,8 @@ def read_poses(path: Path) -> np.ndarray:
             values = []
         if len(values) != 12:
             raise PoseconsError(f"{path}:{number}: expected 12 numbers, got {line.strip()[:60]!r}")
+        if not np.isfinite(values).all():
+            raise PoseconsError(f"{path}:{number}: NaN or infinite number in a pose")
         rows.append(values)
     poses = np.tile(np.eye(4), (len(rows), 1, 1))
     poses[:, :3, :] = np.asarray(rows).reshape(-1, 3, 4)

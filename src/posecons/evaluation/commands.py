@@ -9,9 +9,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli import device, non_negative_int, output_file, output_folder, positive_int
 from ..errors import PoseconsError
 from ..fileio import atomic_write, write_json, write_text
-from . import depth, pose  # light (numpy); plots, torch and the data layer load inside the commands
+from . import (  # light (numpy); plots, torch and the data layer load inside the commands
+    depth,
+    pose,
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,14 +30,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "with --checkpoint it is exported on the fly when missing)")
     p.add_argument("--data-path", type=Path, help="KITTI raw root (with --checkpoint)")
     p.add_argument("--split-file", type=Path, help="split lines; gives the sequences (default: the GT's lines)")
-    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame", help="median scaling per frame, per sequence, or none")
+    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame",
+                   help="median scaling per frame, per sequence, or none")
     p.add_argument("--gt-kind", choices=tuple(depth.CROP_FOR_GT_KIND), default="lidar",
                    help="lidar: Garg crop, 1e-3 < gt < 80 m; improved: gt > 0, no crop")
     p.add_argument("--post-process", action="store_true", help="average with the flipped image's prediction")
-    p.add_argument("--save-disps", type=Path, metavar="OUT.npy", help="save the model's disparities")
+    p.add_argument("--save-disps", type=output_file, metavar="OUT.npy", help="save the model's disparities")
     _add_model_options(p)
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the results as JSON")
-    p.add_argument("--plots", type=Path, metavar="DIR", help="write scale and error plots (PNG)")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
+    p.add_argument("--plots", type=output_folder, metavar="DIR", help="write scale and error plots (PNG)")
     p.set_defaults(func=evaluate_depth_command)
 
     p = subparsers.add_parser("evaluate-pose", help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
@@ -43,26 +48,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
     p.add_argument("--gt-poses", type=Path, required=True, metavar="G.txt", help="KITTI ground-truth pose file")
     p.add_argument("--data-path", type=Path, help="KITTI odometry root with sequences/ (with --checkpoint)")
-    p.add_argument("--sequence", help="odometry sequence, e.g. 09 (with --checkpoint)")
+    p.add_argument("--sequence", type=non_negative_int, help="odometry sequence, e.g. 09 (with --checkpoint)")
     p.add_argument("--times", type=Path, help="times.txt (seconds) for the TUM timestamps (default: frame / 10 Hz)")
     p.add_argument("--const-velocity", choices=pose.CONST_VELOCITY_MODES, default="first",
                    help="baseline: repeat the first GT step, or the previous GT step")
     _add_model_options(p)
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the results as JSON")
-    p.add_argument("--out-dir", type=Path, metavar="DIR", help="write trajectories (KITTI, TUM) and a top-view plot")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
+    p.add_argument("--out-dir", type=output_folder, metavar="DIR",
+                   help="write trajectories (KITTI, TUM) and a top-view plot")
     p.set_defaults(func=evaluate_pose_command)
 
     p = subparsers.add_parser("compare", help="Markdown table (paper's Table 1 layout) from depth JSONs",
                               description="Compare depth evaluations; a run directory means <run>/eval/depth.json.")
     p.add_argument("results", nargs="+", type=Path, metavar="RUN_OR_JSON")
     p.add_argument("--names", nargs="+", help="row names (default: run directory or file name)")
-    p.add_argument("--out", type=Path, metavar="FILE", help="also write the table to FILE")
+    p.add_argument("--out", type=output_file, metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=compare_command)
 
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--batch-size", type=int, default=8, help="images per forward pass (with --checkpoint)")
-    p.add_argument("--device", default=None, help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--batch-size", type=positive_int, default=8, help="images per forward pass (with --checkpoint)")
+    p.add_argument("--device", type=device, default=None, help="torch device (default: cuda if available, else cpu)")
 
 
 def _require(args: argparse.Namespace, *names: str) -> None:
@@ -78,6 +84,8 @@ def _load_model(args: argparse.Namespace):
     from ..checkpoint import load_model
 
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise PoseconsError(f"--device {device}: CUDA is not available on this machine")
     model, config = load_model(args.checkpoint, map_location=device)
     return model, config, device
 

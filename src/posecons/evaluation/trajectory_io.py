@@ -45,8 +45,6 @@ def read_kitti_poses(path: str | Path) -> np.ndarray:
     poses = read_poses(Path(path))
     if len(poses) == 0:
         raise PoseconsError(f"{path}: no KITTI poses found")
-    if not np.isfinite(poses).all():
-        raise PoseconsError(f"{path}: NaN or infinite values in KITTI poses")
     return poses
 
 

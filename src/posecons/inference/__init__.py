@@ -16,6 +16,8 @@ __all__ = sorted(_WHERE)
 def __getattr__(name: str):
     if name not in _WHERE:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_WHERE[name], __name__), name)
-    globals()[name] = value  # replaces the submodule `predict` that the import bound to this name
-    return value
+    module = importlib.import_module(_WHERE[name], __name__)
+    for key, where in _WHERE.items():  # also replaces the submodule `predict` the import bound to that name
+        if where == _WHERE[name]:
+            globals()[key] = getattr(module, key)
+    return globals()[name]

@@ -27,8 +27,8 @@ import numpy as np
 from PIL import Image
 
 from ...errors import PoseconsError
-from ..calib import format_calib
 from ...fileio import output_dir
+from ..calib import format_calib
 from ..kitti_odometry import write_poses
 from ..oxts import DATAFORMAT, format_oxts, poses_to_oxts
 from ..splits import SplitLine, write_split
