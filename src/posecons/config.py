@@ -81,6 +81,9 @@ class DataConfig:
     flip_prob: float = 0.5  # probability in [0, 1]
     jitter_prob: float = 0.5
     num_workers: int = 2  # DataLoader worker processes; 0 loads in the training process
+    # Drop split lines whose frames (model.frame_ids) are not all on disk, printing how many, instead
+    # of stopping at the first: e.g. frame offsets ±3 on a split made for ±1 near drive ends.
+    skip_incomplete: bool = False
 
 
 @dataclass

@@ -65,11 +65,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _synth(args: argparse.Namespace) -> int:
+    from .splits import read_split
     from .synth import generate_synth
 
     info = generate_synth(args.out, args.drives, args.frames, args.seed, args.ext, args.width, args.height, args.workers,
                           args.neighbours)
-    print(f"wrote {len(info['drives'])} drives × {args.frames} frames to {args.out} (test: {', '.join(info['test_drives'])})")
+    lines = len(read_split(args.out / "splits" / "synth" / "train_files.txt"))
+    print(f"wrote {len(info['drives'])} drives × {args.frames} frames to {args.out} "
+          f"(test: {', '.join(info['test_drives'])}); {lines} training lines with frames ±{args.neighbours}: "
+          f"enough for train.batch_size ≤ {lines} and model.frame_ids within ±{args.neighbours}")
     return 0
 
 

@@ -17,15 +17,20 @@ def require_file(path: Path, what: str) -> Path:
     return path
 
 
-def load_rgb(path: Path, draft_size: tuple[int, int] | None = None) -> Image.Image:
+def load_rgb(path: Path, draft_size: tuple[int, int] | None = None,
+             like: tuple[Path, tuple[int, int]] | None = None) -> Image.Image:
     """Open an image file as an RGB PIL image (decoded now, so errors surface here).
 
     ``draft_size`` (width, height) lets JPEG decoding shrink by a power of two while staying at
-    least that large, which makes the later resize much cheaper.
+    least that large, which makes the later resize much cheaper. ``like`` = (reference image, its
+    (width, height)): the image must have that size, or the error names both files.
     """
     require_file(path, "image")
     try:
         with Image.open(path) as img:
+            if like is not None and img.size != like[1]:
+                raise PoseconsError(f"{path}: image is {img.size[0]}×{img.size[1]} pixels but {like[0]} of the same "
+                                    f"drive and camera is {like[1][0]}×{like[1][1]}; a drive's frames share one size")
             if draft_size is not None:
                 img.draft("RGB", draft_size)
             return img.convert("RGB")

@@ -136,7 +136,8 @@ class Trainer:
         self.train_set = build_dataset(config, data_path, train_file, train=True)
         if len(self.train_set) < t.batch_size * self.env.world:
             raise PoseconsError(f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
-                                f"({t.batch_size} × {self.env.world} processes)")
+                                f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
+                                "more data (`posecons synth` prints how many training lines it wrote)")
         self.validator = (Validator(config, data_path, val_file, self.out, self.device)
                           if val_file and t.val_every != "off" else None)
 
