@@ -2,7 +2,7 @@
 
 The dataset only *draws* the parameters (flip and four jitter factors) from a generator seeded by
 (seed, epoch, index), so a resumed run sees bit-identical augmentation whatever the worker layout.
-The model applies :func:`color_jitter` to whole batches on its device (SPEC §6).
+The model applies :func:`color_jitter` to whole batches on its device.
 """
 
 from __future__ import annotations

@@ -110,7 +110,7 @@ def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
 
 
 def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:
-    """(3, 4) P_velo→img = P_rect_0<cam> · R_rect_00 · [R|T]_velo→cam (SPEC §8)."""
+    """(3, 4) P_velo→img = P_rect_0<cam> · R_rect_00 · [R|T]_velo→cam."""
     date_dir = Path(date_dir)
     source = date_dir / "calib_cam_to_cam.txt"
     p_rect, _ = raw_projection(date_dir, cam)

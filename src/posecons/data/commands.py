@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="training lines need frames ±N (for model.frame_ids [0, -N, N])")
     p.set_defaults(func=_synth)
 
-    p = subparsers.add_parser("export-gt", help="export ground-truth depth of a split to .npz (SPEC §8)")
+    p = subparsers.add_parser("export-gt", help="export the ground-truth depth of a split to .npz")
     p.add_argument("--data-path", type=Path, required=True, help="KITTI raw root")
     p.add_argument("--split-file", type=Path, required=True, help="split file: <folder> <frame> <l|r> lines")
     p.add_argument("--out", type=output_file, required=True, help="output .npz")

@@ -1,4 +1,4 @@
-"""Ground-truth depth for evaluation (SPEC §8): LiDAR projection and KITTI's improved PNGs.
+"""Ground-truth depth for evaluation: LiDAR projection and KITTI's improved PNGs.
 
 Stored as one ``.npz`` without pickles: float32 (H, W) maps under keys ``000000``, ``000001``, …
 in split order (0 = no ground truth; sizes may differ between dates) and a unicode array

@@ -1,4 +1,4 @@
-"""Split files: one ``<folder> <frame> <side>`` line per sample (SPEC §7).
+"""Split files: one ``<folder> <frame> <side>`` line per sample.
 
 Raw KITTI lines name a drive folder (``2011_09_26/2011_09_26_drive_0002_sync``), odometry lines a
 sequence number (``9``). Eigen test lines pad frames to 10 digits; the frame value is what matters.

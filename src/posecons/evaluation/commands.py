@@ -20,7 +20,7 @@ from . import (  # light (numpy); plots, torch and the data layer load inside th
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the evaluation sub-commands to the ``posecons`` parser."""
-    p = subparsers.add_parser("evaluate-depth", help="KITTI depth metrics and scale consistency (SPEC §9)",
+    p = subparsers.add_parser("evaluate-depth", help="KITTI depth metrics (Eigen protocol) and scale consistency",
                               description="Evaluate predicted disparities (or a model) against ground-truth depth.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--pred-disps", type=Path, metavar="P.npy",
@@ -42,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=evaluate_depth_command)
 
     p = subparsers.add_parser("evaluate-pose", help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
-                              description="Evaluate predicted ego-motion against KITTI odometry poses (SPEC §10).")
+                              description="Evaluate predicted ego-motion against KITTI odometry poses.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--pred-poses", type=Path, metavar="P.txt", help="KITTI pose file, camera → world")
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
