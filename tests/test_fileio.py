@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from posecons.errors import PoseconsError
-from posecons.fileio import MANIFEST, append_record, atomic_file, output_dir, write_json, write_text
+from posecons.fileio import MANIFEST, append_record, atomic_file, output_dir, remove_temporaries, write_json, write_text
 
 
 @pytest.fixture
@@ -101,6 +101,17 @@ def test_output_path_that_is_a_file_is_refused(tmp_path: Path) -> None:
         pass
     with pytest.raises(PoseconsError, match="cannot create this folder"):
         write_text(tmp_path / "f" / "sub" / "a.txt", "x")
+
+
+def test_temporaries_of_a_killed_writer_are_removed(tmp_path: Path) -> None:
+    import tempfile
+
+    fd, name = tempfile.mkstemp(prefix=".last.", suffix=".pt", dir=tmp_path)  # what atomic_file makes
+    os.close(fd)
+    for keep in ("last.pt", ".hidden", ".last.pt"):
+        (tmp_path / keep).write_text("x")
+    assert remove_temporaries(tmp_path) == [Path(name)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".hidden", ".last.pt", "last.pt"]
 
 
 def test_append_record_drops_rows_a_resume_repeats(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
@@ -23,6 +24,8 @@ from typing import Any
 from .errors import PoseconsError
 
 MANIFEST = ".posecons-outputs.json"  # in an output folder: the files posecons wrote there
+# What tempfile.mkstemp makes of atomic_file's prefix ".<stem>." and the target's suffix.
+_TEMPORARY = re.compile(r"\.[^/]+\.[a-z0-9_]{8}(\.\w+)?")
 
 
 def _umask() -> int:
@@ -83,6 +86,15 @@ def atomic_file(path: str | Path) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
         remove_empty(created)
         raise
+
+
+def remove_temporaries(folder: str | Path) -> list[Path]:
+    """Delete the temporary files :func:`atomic_file` left in ``folder`` when its process was killed
+    (SIGKILL gives it no chance to clean up). Only for folders whose files are all posecons's own."""
+    stale = [p for p in Path(folder).glob(".*") if p.is_file() and _TEMPORARY.fullmatch(p.name)]
+    for path in stale:
+        path.unlink()
+    return stale
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], Any]) -> None:

@@ -46,7 +46,7 @@ from tqdm import tqdm
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
 from ..errors import Interrupted, PoseconsError
-from ..fileio import make_dirs, remove_empty, write_json, write_text
+from ..fileio import make_dirs, remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .data import build_dataset, split_files
 from .validation import Validator
@@ -157,6 +157,8 @@ class Trainer:
         self.session_start = time.time()
         self.stop = StopRequest()  # `train` installs it as the signal handler
         if resume:
+            if self.env.main:  # a checkpoint being written when the run was killed
+                remove_temporaries(self.out / "checkpoints")
             self._load(self.out / "checkpoints" / "last.pt")
         elif self.env.main:
             write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
