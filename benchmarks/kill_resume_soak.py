@@ -1,7 +1,7 @@
 """Kill-and-resume soak: SIGKILL a short deterministic CPU run at random moments, resume it each
 time, and check that its final weights equal those of an uninterrupted run.
 
-    python benchmarks/kill_resume_soak.py --kills 10 --steps 24 [--data DIR] [--seed 0]
+    python benchmarks/kill_resume_soak.py --kills 10 --steps 40 [--data DIR] [--seed 0]
 
 Not part of the test suite (it takes minutes). Kills land anywhere: during start-up, in a step,
 while a checkpoint is written. After a kill the run is resumed from ``last.pt`` if one exists
@@ -41,7 +41,7 @@ def command(data: Path, out: Path, steps: int, resume: bool) -> list[str]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--kills", type=int, default=10)
-    parser.add_argument("--steps", type=int, default=24, help="optimiser steps of the run")
+    parser.add_argument("--steps", type=int, default=40, help="optimiser steps of the run")
     parser.add_argument("--data", type=Path, help="a `posecons synth` dataset (default: a small one, made here)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the kill moments")
     args = parser.parse_args()
@@ -56,14 +56,17 @@ def main() -> int:
                            stdout=subprocess.DEVNULL)
         start = time.time()
         subprocess.run(command(data, tmp / "reference", args.steps, False), check=True, env=env)
-        span = time.time() - start  # one uninterrupted run, start-up included
+        training = json.loads((tmp / "reference" / "train_summary.json").read_text())["minutes"] * 60
+        startup, per_step = time.time() - start - training, training / args.steps
 
         run, last, kills = tmp / "killed", tmp / "killed" / "checkpoints" / "last.pt", []
+        targets = sorted(rng.uniform(0, args.steps) for _ in range(args.kills))  # progress at each kill
         while len(kills) < args.kills:
             proc = subprocess.Popen(command(data, run, args.steps, last.is_file()), env=env,
                                     stderr=subprocess.DEVNULL)
-            saved = load_checkpoint(last)["step"] if last.is_file() else 0
-            delay = rng.uniform(0.1, 0.9) * span * max(1 - saved / args.steps, 0.3)  # within what is left
+            ahead = targets[len(kills)] - (load_checkpoint(last)["step"] if last.is_file() else 0)
+            # kill at the drawn progress, or at a random moment of the start-up when the run is past it
+            delay = startup + ahead * per_step if ahead > 0 else rng.uniform(0, startup)
             try:
                 proc.wait(timeout=delay)
                 break  # finished before this kill

@@ -28,13 +28,12 @@ def _sets(*extra: str) -> list[str]:
     return sum([["--set", s] for s in TINY + list(extra)], [])
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-def test_signal_saves_last_and_says_how_to_resume(synth_data, tmp_path, signum):
-    run = tmp_path / "run"
+def _interrupt(synth_data: Path, run: Path, signum: int) -> int:
+    """Start a training run, send ``signum`` once it is in its loop; check the one-line message and
+    return the step saved in last.pt."""
     args = [sys.executable, "-m", "posecons.cli", "train", "--config", "kitti/baseline", "--data-path", str(synth_data),
             "--out", str(run), "--quiet", *_sets("train.max_steps=6", "train.val_every=1")]
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    proc = subprocess.Popen(args, env=env, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(args, env={**os.environ, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 300
     while time.time() < deadline and proc.poll() is None and not (run / "metrics.jsonl").is_file():
         time.sleep(0.05)  # the first validation ran: the loop is going
@@ -47,12 +46,21 @@ def test_signal_saves_last_and_says_how_to_resume(synth_data, tmp_path, signum):
     assert len(lines) == 1 and "last.pt" in lines[0] and "--resume" in lines[0], err
     step = load_checkpoint(run / "checkpoints" / "last.pt")["step"]
     assert 1 <= step < 6
+    return step
 
+
+def test_sigterm_saves_last_and_says_how_to_resume(synth_data, tmp_path):
+    _interrupt(synth_data, tmp_path / "run", signal.SIGTERM)
+
+
+def test_ctrl_c_then_resume_reports_the_total_time(synth_data, tmp_path):
+    run = tmp_path / "run"
+    _interrupt(synth_data, run, signal.SIGINT)
     assert cli(["train", "--data-path", str(synth_data), "--out", str(run), "--resume", "--quiet"]) == 0
     summary = json.loads((run / "train_summary.json").read_text())
     assert summary["steps"] == 6 and summary["minutes"] > summary["minutes_this_session"] > 0
     steps = [json.loads(line)["step"] for line in (run / "metrics.jsonl").read_text().splitlines()]
-    assert steps == list(range(1, 7))  # the rows of the steps repeated after the resume appear once
+    assert steps == list(range(1, 7))
 
 
 def test_run_that_fails_before_training_leaves_no_folder(synth_data, tmp_path, capsys):

@@ -415,7 +415,10 @@ def _discard(out: Path, created: list[Path]) -> None:
     and parents this call created."""
     if out.is_dir():
         for entry in out.iterdir():
-            shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
     remove_empty(created)
 
 
