@@ -19,6 +19,7 @@ from pathlib import Path
 
 from . import __version__
 from .errors import PoseconsError
+from .fileio import check_writable
 
 COMMAND_MODULES = (
     "posecons.data.commands",
@@ -51,7 +52,7 @@ finite_float = _number(float, lambda v: True, "a finite number")
 fraction = _number(float, lambda v: 0 <= v <= 1, "a number in [0, 1]")
 
 
-def device(text: str) -> str:
+def device_name(text: str) -> str:
     """A torch device name, checked by spelling only (availability is checked when it is used)."""
     if not re.fullmatch(r"cpu|cuda(:\d+)?|mps", text):
         raise argparse.ArgumentTypeError(f"expected cpu, cuda, cuda:N or mps, got {text!r}")
@@ -60,8 +61,6 @@ def device(text: str) -> str:
 
 def _writable(folder: bool) -> Callable[[str], Path]:
     def parse(text: str) -> Path:
-        from .fileio import check_writable
-
         try:
             return check_writable(Path(text), folder)
         except PoseconsError as exc:

@@ -9,13 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import device, non_negative_int, output_file, output_folder, positive_int
+from ..cli import device_name, non_negative_int, output_file, output_folder, positive_int
 from ..errors import PoseconsError
 from ..fileio import atomic_write, write_json, write_text
-from . import (  # light (numpy); plots, torch and the data layer load inside the commands
-    depth,
-    pose,
-)
+
+# depth and pose are light (numpy); plots, torch and the data layer load inside the commands.
+from . import depth, pose
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -68,7 +67,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=positive_int, default=8, help="images per forward pass (with --checkpoint)")
-    p.add_argument("--device", type=device, default=None, help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--device", type=device_name, default=None,
+                   help="torch device (default: cuda if available, else cpu)")
 
 
 def _require(args: argparse.Namespace, *names: str) -> None:

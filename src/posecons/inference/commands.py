@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import device, non_negative_float, output_folder, positive_float, positive_int
+from ..cli import device_name, non_negative_float, output_folder, positive_float, positive_int
 from .io import DEFAULT_FPS
 
 
@@ -21,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=output_folder, default="predictions",
                    help="output folder: new, empty, or an earlier predict output")
     p.add_argument("--batch-size", type=positive_int, default=4, help="frames per forward pass")
-    p.add_argument("--device", type=device, default="cpu", help="cpu, cuda or cuda:N")
+    p.add_argument("--device", type=device_name, default="cpu", help="cpu, cuda or cuda:N")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--scale", type=positive_float, help="multiply every depth and translation by this factor")
     group.add_argument("--calibrate-gt", metavar="DIR|NPZ",

@@ -46,7 +46,7 @@ from tqdm import tqdm
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
 from ..errors import Interrupted, PoseconsError
-from ..fileio import make_dirs, remove_empty, remove_temporaries, write_json, write_text
+from ..fileio import remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .data import build_dataset, split_files
 from .validation import Validator
@@ -433,7 +433,7 @@ def train(config: Config, data_path: str | Path, out: str | Path, split_dir: str
     out = Path(out)
     main = int(os.environ.get("RANK", 0)) == 0
     fresh = main and not (out.exists() and any(out.iterdir()))  # then everything in it is this run's
-    created = (make_dirs(out.parent) + ([] if out.exists() else [out])) if fresh else []
+    created = [p for p in [out, *out.parents] if not p.exists()][::-1] if fresh else []  # made by the Trainer
     stop = StopRequest()
     with stop.installed():
         try:
