@@ -23,7 +23,7 @@ from posecons.config import load_config
 from posecons.data.splits import read_split
 from posecons.model import PoseConsModel
 
-TINY = ["model.height=32", "model.width=96", "model.num_layers=10", "model.pretrained=false"]
+TINY = ["model.height=64", "model.width=96", "model.num_layers=10", "model.pretrained=false"]
 TRAIN = "train --config kitti/baseline --data-path {syn} --out {out} --quiet " + " ".join(
     f"--set {s}" for s in TINY + ["data.split=synth", "train.batch_size=2", "data.num_workers=0", "train.max_steps=1"])
 DRIVE = "2020_01_01/2020_01_01_drive_0000_sync"
@@ -162,7 +162,7 @@ CASES = [
      "--json {in}/blocker/d.json", ["--json", "blocker is a file"]),
     ("evaluate-depth-no-gt", "evaluate-depth --pred-disps {in}/random.npy", ["--pred-disps needs --gt"]),
     ("evaluate-depth-random-npy", "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz",
-     ["random.npy", "not a readable .npy"]),
+     ["random.npy", "not a .npy array of numbers"]),
     ("evaluate-depth-gt-not-npz", "evaluate-depth --pred-disps {in}/random.npy --gt {in}/result.json",
      ["result.json", "ground-truth"]),
     ("evaluate-depth-random-checkpoint", "evaluate-depth --checkpoint {in}/random.pt --data-path {syn} "
@@ -243,3 +243,16 @@ def test_the_catalogue_covers_every_command():
 
     commands = set(build_parser()._subparsers._group_actions[0].choices)
     assert commands == {c[1].split()[0] for c in CASES} and len(CASES) >= 40
+
+
+def test_predict_again_into_its_output_keeps_the_users_files(world, tmp_path):
+    """A second predict into the same folder replaces its own outputs only (the bug: rmtree of OUT/depth)."""
+    out = tmp_path / "pred"
+    args = ["predict", "--checkpoint", str(world["in"] / "model.pt"), "--input", str(world["in"] / "frames"),
+            "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    (out / "depth" / "notes.txt").write_text("the user's")
+    (out / "mine.txt").write_text("also the user's")
+    assert main(args + ["--no-trajectory"]) == 0
+    assert (out / "depth" / "notes.txt").read_text() == "the user's" and (out / "mine.txt").exists()
+    assert (out / "depth" / "000000.npy").is_file() and not (out / "trajectory_kitti.txt").exists()

@@ -23,6 +23,7 @@ def test_preset_with_base_and_overrides(tmp_path):
     ("model.heigth=96", "unknown config key 'model.heigth'"),
     ("train.batch_size=big", "train.batch_size: expected int"),
     ("model.height=100", "multiples of 32"),
+    ("model.height=32", "at least 64, got 32×640"),  # the networks' padding would fail on 1-pixel features
     ("loss.constraints=[cycle]", "unknown \\['cycle'\\]"),
     ("train.keep_epochs=-2", "train.keep_epochs must be -1"),
     ("model.frame_ids=[0,1]", None),  # valid without fb/cyc

@@ -49,7 +49,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
 class ModelConfig:
     num_layers: int = 18  # ResNet depth for both encoders: 18, 34, 50; 10 is the small demo encoder
     pretrained: Union[bool, str] = "auto"  # ImageNet weights: true (required), false, or "auto" (if reachable)
-    height: int = 192  # network input size; multiples of 32
+    height: int = 192  # network input size in pixels; multiples of 32, at least 64
     width: int = 640
     min_depth: float = 0.1  # metres (up to the unknown scale of monocular training)
     max_depth: float = 100.0
@@ -134,6 +134,8 @@ class Config:
                 f"got {m.height}×{m.width}. Nearby sizes that work: "
                 f"{max(32, round(m.height / 32) * 32)}×{max(32, round(m.width / 32) * 32)}"
             )
+        if min(m.height, m.width) < 64:  # the 1/32-size features must be ≥ 2 pixels for their reflection padding
+            raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
         if m.num_layers not in (10, 18, 34, 50):
             raise PoseconsError(f"model.num_layers must be 10, 18, 34 or 50, got {m.num_layers}")
         if m.pretrained not in (True, False, "auto"):

@@ -106,6 +106,8 @@ def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
         with np.load(path, allow_pickle=False) as data:
             lines = [str(s) for s in data["lines"]]
             maps = [data[f"{i:06d}"] for i in range(len(lines))]
-    except (OSError, KeyError, ValueError) as exc:
-        raise PoseconsError(f"{path}: not a posecons ground-truth file ({exc})") from exc
+    except KeyError as exc:
+        raise PoseconsError(f"{path}: not a posecons ground-truth file (no entry {exc})") from exc
+    except (OSError, ValueError) as exc:  # numpy's own text suggests unpickling, which is never wanted here
+        raise PoseconsError(f"{path}: not a posecons ground-truth file (not an .npz written by export-gt)") from exc
     return maps, lines

@@ -96,8 +96,8 @@ def load_pred_disps(path: Path) -> np.ndarray:
         raise PoseconsError(f"{path}: predictions file not found")
     try:
         return np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise PoseconsError(f"{path}: not a readable .npy array ({exc})") from None
+    except (ValueError, OSError):  # numpy's own text suggests unpickling, which is never wanted here
+        raise PoseconsError(f"{path}: not a .npy array of numbers (damaged, or not written by numpy.save)") from None
 
 
 def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str], Path]:
