@@ -78,3 +78,18 @@ def test_resume_from_a_weights_only_checkpoint_is_refused(synth_data, tmp_path, 
     (run / "checkpoints" / "best.pt").replace(run / "checkpoints" / "last.pt")
     assert cli(["train", "--data-path", str(synth_data), "--out", str(run), "--resume"]) == 2
     assert "holds no training state" in capsys.readouterr().err
+
+
+def test_ctrl_c_during_synth_leaves_nothing(tmp_path):
+    """Ctrl-C reaches the whole process group (parent and render workers): one line, exit 130, no output."""
+    out = tmp_path / "new" / "synth"
+    proc = subprocess.Popen([sys.executable, "-m", "posecons.cli", "synth", "--out", str(out), "--drives", "4",
+                             "--frames", "60", "--width", "320", "--height", "96", "--workers", "2"],
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None and not list(out.parent.glob(".synth.partial-*/2020_01_01")):
+        time.sleep(0.05)  # rendering has begun
+    os.killpg(proc.pid, signal.SIGINT)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 128 + signal.SIGINT and err.strip() == "posecons synth: interrupted", err
+    assert list(tmp_path.iterdir()) == []

@@ -19,6 +19,7 @@ import json
 import multiprocessing
 import os
 import shutil
+import signal
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -242,7 +243,9 @@ def _render_drive(job: _Job, frames: int, workers: int) -> None:
     _JOB = job
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            with multiprocessing.get_context("fork").Pool(workers) as pool:
+            # Ctrl-C reaches the whole process group: the parent stops the pool, the workers stay quiet.
+            quiet = (signal.SIGINT, signal.SIG_IGN)
+            with multiprocessing.get_context("fork").Pool(workers, signal.signal, quiet) as pool:
                 pool.map(_render_frame, range(frames), chunksize=max(1, frames // (4 * workers)))
         else:
             for frame in range(frames):
