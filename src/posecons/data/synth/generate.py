@@ -243,9 +243,14 @@ def _render_drive(job: _Job, frames: int, workers: int) -> None:
     _JOB = job
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            # Ctrl-C reaches the whole process group: the parent stops the pool, the workers stay quiet.
-            quiet = (signal.SIGINT, signal.SIG_IGN)
-            with multiprocessing.get_context("fork").Pool(workers, signal.signal, quiet) as pool:
+            # Ctrl-C reaches the whole process group: the workers are forked with it blocked (a worker
+            # that died of it would hang the pool), the parent receives it once they exist and stops them.
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                pool = multiprocessing.get_context("fork").Pool(workers)
+            finally:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+            with pool:
                 pool.map(_render_frame, range(frames), chunksize=max(1, frames // (4 * workers)))
         else:
             for frame in range(frames):
