@@ -29,21 +29,23 @@ def _sets(*extra: str) -> list[str]:
 
 
 def _interrupt(synth_data: Path, run: Path, signum: int) -> int:
-    """Start a training run, send ``signum`` once it is in its loop; check the one-line message and
-    return the step saved in last.pt."""
+    """Start a training run with a loader worker, send ``signum`` to its process group (as Ctrl-C does)
+    once it is in its loop; check the one-line message and return the step saved in last.pt."""
     args = [sys.executable, "-m", "posecons.cli", "train", "--config", "kitti/baseline", "--data-path", str(synth_data),
-            "--out", str(run), "--quiet", *_sets("train.max_steps=6", "train.val_every=1")]
-    proc = subprocess.Popen(args, env={**os.environ, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE, text=True)
+            "--out", str(run), "--quiet", *_sets("train.max_steps=6", "train.val_every=1", "data.num_workers=1")]
+    proc = subprocess.Popen(args, env={**os.environ, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
     deadline = time.time() + 300
     while time.time() < deadline and proc.poll() is None and not (run / "metrics.jsonl").is_file():
         time.sleep(0.05)  # the first validation ran: the loop is going
     assert proc.poll() is None, proc.stderr.read()
-    proc.send_signal(signum)
+    os.killpg(proc.pid, signum)
     err = proc.communicate(timeout=300)[1]
     assert proc.returncode == 128 + signum
     assert "Traceback" not in err
-    lines = [line for line in err.splitlines() if "error" in line]
-    assert len(lines) == 1 and "last.pt" in lines[0] and "--resume" in lines[0], err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert lines[0].startswith(f"{signal.Signals(signum).name}: stopping after this step"), err
+    assert len(lines) == 2 and "last.pt" in lines[1] and "--resume" in lines[1], err  # not one per worker
     step = load_checkpoint(run / "checkpoints" / "last.pt")["step"]
     assert 1 <= step < 6
     return step

@@ -85,8 +85,11 @@ class StopRequest:
     def __init__(self) -> None:
         self.signum = 0
         self.in_loop = False
+        self.pid = os.getpid()
 
     def _handle(self, signum: int, frame) -> None:
+        if os.getpid() != self.pid:  # a forked DataLoader worker: it keeps loading, the trainer decides
+            return
         name = signal.Signals(signum).name
         if self.in_loop and not self.signum:
             self.signum = signum
