@@ -101,3 +101,36 @@ def test_synth_refuses_non_empty_output(tmp_path: Path) -> None:
     (tmp_path / "keep.txt").write_text("x")
     assert main(["synth", "--out", str(tmp_path), "--drives", "2", "--frames", "3", "--width", "32", "--height", "16"]) == 2
     assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
+
+
+def test_skip_incomplete_drops_lines_without_neighbours_and_says_how_many(tmp_path: Path, kitti_dir: Path,
+                                                                          capsys) -> None:
+    root = _mini_raw(tmp_path / "raw", kitti_dir, frames=3)
+    split = tmp_path / "train.txt"
+    split.write_text(f"{DRIVE} 1 l\n{DRIVE} 2 l\n")
+    with pytest.raises(PoseconsError, match="data.skip_incomplete=true drops such lines"):
+        KittiRawDataset(root, split, 16, 32)
+    dataset = KittiRawDataset(root, split, 16, 32, skip_incomplete=True)
+    assert [line.frame for line in dataset.lines] == [1]
+    assert "train.txt: dropped 1 of 2 lines whose frames [0, -1, 1] do not all exist" in capsys.readouterr().err
+
+
+def test_a_frame_of_another_size_is_named(tmp_path: Path, kitti_dir: Path) -> None:
+    from PIL import Image
+
+    root = _mini_raw(tmp_path / "raw", kitti_dir, frames=4)
+    odd = root / DRIVE / "image_02" / "data" / "0000000003.png"
+    Image.new("RGB", (40, 19)).save(odd)
+    split = tmp_path / "train.txt"
+    split.write_text(f"{DRIVE} 1 l\n{DRIVE} 2 l\n")
+    dataset = KittiRawDataset(root, split, 16, 32)
+    assert dataset[0]["frames"].shape == (3, 3, 16, 32)
+    with pytest.raises(PoseconsError, match=r"0000000003\.png: image is 40×19 pixels but .*0000000001\.png .* 62×19"):
+        dataset[1]
+
+
+def test_bundled_splits_are_found_by_name() -> None:
+    assert len(read_split("eigen")) == 697  # eigen/test_files.txt
+    assert read_split("odom/test_files_09.txt")[0].folder == "9"
+    with pytest.raises(PoseconsError, match="eigen_nope: split file not found .*bundled split: eigen, eigen_benchmark"):
+        read_split("eigen_nope")

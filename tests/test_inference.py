@@ -20,6 +20,7 @@ from posecons.data.calib import read_calib_intrinsics
 from posecons.data.io import resize_rgb
 from posecons.data.synth import drive_folder, generate_synth
 from posecons.data.trajectory_io import read_kitti_poses, read_tum
+from posecons.fileio import MANIFEST
 from posecons.geometry import backproject
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor
@@ -294,7 +295,7 @@ def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, bas
     assert max(info["max_abs_diff"]["depth"].values()) < 1e-4
     assert max(info["max_abs_diff"]["pose"].values()) < 1e-4
     assert {p.name for p in (tmp_path / "export").iterdir()} == {"depth.onnx", "pose.onnx", "weights.safetensors",
-                                                                  "export.json"}
+                                                                  "export.json", MANIFEST}
     model, _ = load_model(tmp_path / "export" / "weights.safetensors")
     reference, _ = load_model(ckpt)
     for a, b in zip(model.state_dict().values(), reference.state_dict().values()):

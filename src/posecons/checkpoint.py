@@ -9,9 +9,7 @@ model state dict with the config as JSON metadata.
 from __future__ import annotations
 
 import json
-import os
 import pickle
-import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
@@ -20,23 +18,7 @@ import torch
 
 from .config import Config, config_from_dict
 from .errors import PoseconsError
-
-
-def atomic_write(path: str | Path, write) -> None:
-    """Call ``write(tmp_path)`` then rename onto ``path``: readers never see a partial file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files; give the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+from .fileio import atomic_write
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> None:
@@ -53,10 +35,14 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
             warnings.simplefilter("ignore", UserWarning)
             state = torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
-        raise PoseconsError(f"{path}: refused to load — it holds objects other than weights and plain "
-                            f"data (not a posecons checkpoint, or unsafe): {str(exc).splitlines()[0]}") from exc
-    except (RuntimeError, EOFError, OSError) as exc:
-        raise PoseconsError(f"{path}: not a readable checkpoint ({exc})") from exc
+        unsafe = [line.strip() for line in str(exc).splitlines() if "GLOBAL" in line]  # a blocked import
+        if unsafe:
+            raise PoseconsError(f"{path}: refused to load — it holds objects other than weights and plain "
+                                f"data (not a posecons checkpoint, or unsafe): {unsafe[0]}") from exc
+        raise PoseconsError(f"{path}: not a readable checkpoint (damaged, or not written by torch.save)") from exc
+    except Exception as exc:  # damaged bytes surface as almost any error type inside torch.load
+        raise PoseconsError(f"{path}: not a readable checkpoint (damaged, or not written by torch.save: "
+                            f"{type(exc).__name__})") from exc
     if not isinstance(state, dict) or "config" not in state or "model" not in state:
         raise PoseconsError(f"{path}: not a posecons checkpoint (no 'config' and 'model' entries)")
     return state

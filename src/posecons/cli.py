@@ -1,16 +1,25 @@
 """`posecons` command line: a thin layer over the library.
 
 Each area registers its own sub-commands through ``register(subparsers)`` in its
-``commands`` module, so the CLI file never grows with the library.
+``commands`` module, so the CLI file never grows with the library. Those modules import the
+heavy libraries (torch, matplotlib, av, onnx) inside the commands only, so ``--help``,
+``--version`` and usage errors answer at once.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import math
+import re
+import signal
 import sys
+from collections.abc import Callable
+from pathlib import Path
 
+from . import __version__
 from .errors import PoseconsError
+from .fileio import check_writable
 
 COMMAND_MODULES = (
     "posecons.data.commands",
@@ -20,9 +29,71 @@ COMMAND_MODULES = (
 )
 
 
+def _number(kind: type, test: Callable[[float], bool], rule: str) -> Callable[[str], float]:
+    """An argparse ``type`` that accepts a finite ``kind`` (int or float) passing ``test``."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
+                                             f"got {text!r}") from None
+        if not (math.isfinite(value) and test(value)):
+            raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
+        return value
+    return parse
+
+
+# Argument types shared by the commands: a bad number is a usage error naming the option.
+positive_int = _number(int, lambda v: v >= 1, "an integer ≥ 1")
+non_negative_int = _number(int, lambda v: v >= 0, "an integer ≥ 0")
+positive_float = _number(float, lambda v: v > 0, "a number > 0")
+non_negative_float = _number(float, lambda v: v >= 0, "a number ≥ 0")
+finite_float = _number(float, lambda v: True, "a finite number")
+fraction = _number(float, lambda v: 0 <= v <= 1, "a number in [0, 1]")
+
+
+def device_name(text: str) -> str:
+    """A torch device name, checked by spelling only (availability is checked when it is used)."""
+    if not re.fullmatch(r"cpu|cuda(:\d+)?|mps", text):
+        raise argparse.ArgumentTypeError(f"expected cpu, cuda, cuda:N or mps, got {text!r}")
+    return text
+
+
+def _writable(folder: bool) -> Callable[[str], Path]:
+    def parse(text: str) -> Path:
+        try:
+            return check_writable(Path(text), folder)
+        except PoseconsError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    return parse
+
+
+# Output paths are checked when parsed, so an impossible one fails before any work is done.
+output_file = _writable(folder=False)
+output_folder = _writable(folder=True)
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's help ends with its default, unless it has none or the text already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        no_default = action.default is None or action.default is False or action.default == []
+        if no_default or action.default is argparse.SUPPRESS or "default" in text:
+            return text
+        return super()._get_help_string(action)
+
+
+class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="posecons", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser = Parser(prog="posecons", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"posecons {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
     for name in COMMAND_MODULES:
         try:
             module = importlib.import_module(name)
@@ -34,13 +105,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _message(exc: PoseconsError) -> str:
+    """The error's one line; one re-raised by a DataLoader worker carries the worker's traceback."""
+    text = str(exc)
+    if text.startswith(f"Caught {type(exc).__name__} in DataLoader worker"):
+        text = text.rstrip().splitlines()[-1].split(f"{type(exc).__name__}: ", 1)[-1]
+    return text
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except PoseconsError as exc:
-        print(f"posecons {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        print(f"posecons {args.command}: error: {_message(exc)}", file=sys.stderr)
+        return getattr(exc, "exit_code", 2)
+    except KeyboardInterrupt:  # Ctrl-C outside a training loop (which handles it itself): no traceback
+        print(f"posecons {args.command}: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT
 
 
 if __name__ == "__main__":

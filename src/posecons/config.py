@@ -9,6 +9,7 @@ before anything runs.
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,15 +23,38 @@ CONSTRAINTS = ("fb", "id", "cyc")
 PRESETS = Path(__file__).resolve().parent / "configs"  # bundled presets; the repository's configs/ links here
 
 
+def _at_least(low: float) -> tuple:
+    return (lambda v: v >= low, f"must be ≥ {low:g}")
+
+
+_FRACTION = (lambda v: 0 <= v <= 1, "must be in [0, 1]")
+_POSITIVE = (lambda v: v > 0, "must be > 0")
+RANGES = {  # "section.key": (test, what a valid value is); every float must also be finite
+    "model.min_depth": _POSITIVE, "model.max_depth": _POSITIVE,
+    "model.scales": (lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
+                     "must be distinct scales from 0–3, e.g. [0, 1, 2, 3]"),
+    "loss.ssim_weight": _FRACTION, "loss.identity_fraction": _FRACTION,
+    "loss.smoothness_weight": _at_least(0), "loss.fb_weight": _at_least(0), "loss.id_weight": _at_least(0),
+    "loss.cyc_weight": _at_least(0), "loss.constraint_start_step": _at_least(0),
+    "data.split": (bool, "must name a split"), "data.img_ext": (bool, "must be an extension such as .png"),
+    "data.flip_prob": _FRACTION, "data.jitter_prob": _FRACTION, "data.num_workers": _at_least(0),
+    "train.batch_size": _at_least(1), "train.lr": _POSITIVE, "train.epochs": _at_least(1),
+    "train.lr_decay_epochs": (lambda v: all(e >= 1 for e in v), "must be epochs ≥ 1"),
+    "train.lr_decay": _POSITIVE, "train.grad_accum": _at_least(1), "train.seed": _at_least(0),
+    "train.max_steps": _at_least(0), "train.log_every": _at_least(1), "train.image_every": _at_least(0),
+    "train.val_samples": _at_least(1), "train.checkpoint_every": _at_least(0), "train.max_bad_steps": _at_least(1),
+}
+
+
 @dataclass
 class ModelConfig:
     num_layers: int = 18  # ResNet depth for both encoders: 18, 34, 50; 10 is the small demo encoder
     pretrained: Union[bool, str] = "auto"  # ImageNet weights: true (required), false, or "auto" (if reachable)
-    height: int = 192  # network input size; multiples of 32
+    height: int = 192  # network input size in pixels; multiples of 32, at least 64
     width: int = 640
-    min_depth: float = 0.1
+    min_depth: float = 0.1  # metres (up to the unknown scale of monocular training)
     max_depth: float = 100.0
-    scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])
+    scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])  # decoder outputs at 1/2^s size; any of 0-3
     frame_ids: list[int] = field(default_factory=lambda: [0, -1, 1])  # target first, then sources
 
 
@@ -55,15 +79,18 @@ class DataConfig:
     split: str = "eigen_zhou"  # split files are read from <data_path>/splits/<split> unless --split-dir
     img_ext: str = ".png"
     calib_intrinsics: bool = True  # K from each drive's calibration; false: KITTI's fixed normalised K
-    flip_prob: float = 0.5
+    flip_prob: float = 0.5  # probability in [0, 1]
     jitter_prob: float = 0.5
-    num_workers: int = 2
+    num_workers: int = 2  # DataLoader worker processes; 0 loads in the training process
+    # Drop split lines whose frames (model.frame_ids) are not all on disk, printing how many, instead
+    # of stopping at the first: e.g. frame offsets ±3 on a split made for ±1 near drive ends.
+    skip_incomplete: bool = False
 
 
 @dataclass
 class TrainConfig:
     batch_size: int = 12
-    lr: float = 1e-4
+    lr: float = 1e-4  # Adam learning rate
     epochs: int = 20
     lr_decay_epochs: list[int] = field(default_factory=lambda: [15])  # lr × lr_decay at these epochs
     lr_decay: float = 0.1
@@ -74,13 +101,14 @@ class TrainConfig:
     sync_bn: bool = False  # SyncBatchNorm in the depth net across processes (the pose net's stays per group)
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50
-    image_every: int = 500
-    val_every: int = 0  # steps between validations; 0: once per epoch
+    image_every: int = 500  # steps between TensorBoard images; 0: none
+    # Steps between validations, "epoch" (after each epoch) or "off" (never; no best.pt); 0 also means "epoch".
+    val_every: Union[int, str, bool] = "epoch"
     val_samples: int = 500  # validation uses at most this many val-split samples, spread evenly
     # best.pt: lowest "val_photometric" (self-supervised, the default) or "abs_rel" (needs LiDAR
     # ground truth in the val split: supervised model selection, named as such in every report)
     best_metric: str = "val_photometric"
-    checkpoint_every: int = 500  # steps between `last` checkpoints (and at every epoch end)
+    checkpoint_every: int = 500  # steps between `last` checkpoints (and at every epoch end); 0: epoch ends only
     keep_epochs: int = -1  # per-epoch weight files kept (the newest); -1 keeps all, 0 none
     max_bad_steps: int = 5  # consecutive non-finite losses before the run stops
 
@@ -93,13 +121,25 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
 
     def validate(self) -> Config:
-        m, lo = self.model, self.loss
+        self._check_ranges()
+        m, lo, t = self.model, self.loss, self.train
+        if m.min_depth >= m.max_depth:
+            raise PoseconsError(f"model.min_depth ({m.min_depth}) must be below model.max_depth ({m.max_depth})")
+        if t.val_every is False:  # YAML 1.1 reads a bare `off` as false
+            t.val_every = "off"
+        elif t.val_every == 0:  # the old spelling of "epoch", in the configs of earlier runs
+            t.val_every = "epoch"
+        if t.val_every not in ("epoch", "off") and (type(t.val_every) is not int or t.val_every < 1):
+            raise PoseconsError(f"train.val_every must be a number of steps ≥ 1, \"epoch\" (after each epoch) "
+                                f"or \"off\"; got {t.val_every!r}")
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(
                 f"model.height/width must be positive multiples of 32 (the encoder downsamples 32×); "
                 f"got {m.height}×{m.width}. Nearby sizes that work: "
                 f"{max(32, round(m.height / 32) * 32)}×{max(32, round(m.width / 32) * 32)}"
             )
+        if min(m.height, m.width) < 64:  # the 1/32-size features must be ≥ 2 pixels for their reflection padding
+            raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
         if m.num_layers not in (10, 18, 34, 50):
             raise PoseconsError(f"model.num_layers must be 10, 18, 34 or 50, got {m.num_layers}")
         if m.pretrained not in (True, False, "auto"):
@@ -123,6 +163,17 @@ class Config:
         if self.data.dataset not in ("kitti_raw", "kitti_odom"):
             raise PoseconsError(f"data.dataset must be kitti_raw or kitti_odom, got {self.data.dataset!r}")
         return self
+
+    def _check_ranges(self) -> None:
+        for section in dataclasses.fields(self):
+            for item in dataclasses.fields(getattr(self, section.name)):
+                key, value = f"{section.name}.{item.name}", getattr(getattr(self, section.name), item.name)
+                numbers = value if isinstance(value, list) else [value]
+                if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
+                    raise PoseconsError(f"{key} must be a finite number, got {value!r}")
+                test, rule = RANGES.get(key, (None, ""))
+                if test is not None and not test(value):
+                    raise PoseconsError(f"{key} {rule}, got {value!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -2,8 +2,7 @@
 
 The dataset only *draws* the parameters (flip and four jitter factors) from a generator seeded by
 (seed, epoch, index), so a resumed run sees bit-identical augmentation whatever the worker layout.
-:func:`jitter_batch` applies the colour jitter to whole batches on their device, before the model
-(SPEC §6).
+:func:`jitter_batch` applies the colour jitter to whole batches on their device, before the model.
 """
 
 from __future__ import annotations

@@ -33,6 +33,8 @@ def parse_calib_text(text: str, source: str) -> dict[str, CalibValue]:
             raise PoseconsError(f"{source}:{number}: expected 'key: values', got {line.strip()[:60]!r}")
         try:
             out[key] = np.array([float(v) for v in value.split()], dtype=np.float64)
+            if not np.isfinite(out[key]).all():
+                raise PoseconsError(f"{source}:{number}: {key!r} holds a NaN or infinite number")
         except ValueError:
             if any(c.isdigit() for c in value) and _looks_numeric(value):
                 raise PoseconsError(f"{source}:{number}: bad number in {key!r}: {value.strip()[:60]!r}") from None
@@ -87,6 +89,9 @@ def raw_projection(date_dir: Path, cam: int = 2) -> tuple[np.ndarray, tuple[int,
     calib = cam_to_cam(Path(date_dir))
     p_rect = calib_matrix(calib, f"P_rect_0{cam}", (3, 4), source)
     width, height = calib_matrix(calib, f"S_rect_0{cam}", (2,), source)
+    if width < 1 or height < 1 or p_rect[0, 0] <= 0 or p_rect[1, 1] <= 0:
+        raise PoseconsError(f"{source}: S_rect_0{cam} ({width:g}×{height:g}) and the focal lengths of P_rect_0{cam} "
+                            f"must be positive")
     return p_rect, (int(round(width)), int(round(height)))
 
 
@@ -133,7 +138,7 @@ def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
 
 
 def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:
-    """(3, 4) P_velo→img = P_rect_0<cam> · R_rect_00 · [R|T]_velo→cam (SPEC §8)."""
+    """(3, 4) P_velo→img = P_rect_0<cam> · R_rect_00 · [R|T]_velo→cam."""
     date_dir = Path(date_dir)
     source = date_dir / "calib_cam_to_cam.txt"
     p_rect, _ = raw_projection(date_dir, cam)

@@ -9,18 +9,23 @@ from ..errors import PoseconsError
 from .frames import FrameDataset
 from .kitti_odometry import KittiOdometryDataset
 from .kitti_raw import KittiRawDataset
+from .splits import BUNDLED, bundled_names
 
 
 def split_files(config: Config, data_path: str | Path, split_dir: str | Path | None) -> tuple[Path, Path | None]:
-    """(train split, val split or None); the split directory defaults to DATA/splits/<data.split>."""
+    """(train split, val split or None) from --split-dir, else DATA/splits/<data.split>, else the
+    bundled split of that name (eigen_zhou, eigen_full, odom)."""
     data_path = Path(data_path)
     if not data_path.is_dir():
         raise PoseconsError(f"data path {data_path} is not a directory")
     folder = Path(split_dir) if split_dir else data_path / "splits" / config.data.split
+    if not split_dir and not folder.is_dir() and (BUNDLED / config.data.split / "train_files.txt").is_file():
+        folder = BUNDLED / config.data.split
     train = folder / "train_files.txt"
     if not train.is_file():
-        raise PoseconsError(f"{train}: training split file not found (data.split={config.data.split!r}; "
-                            f"pass --split-dir or run `posecons synth` / `posecons prepare` to create one)")
+        raise PoseconsError(f"{train}: training split file not found (data.split={config.data.split!r}; bundled: "
+                            f"{', '.join(bundled_names())}; pass --split-dir or run `posecons synth` / "
+                            "`posecons prepare` to create one)")
     val = folder / "val_files.txt"
     return train, val if val.is_file() else None
 
@@ -30,4 +35,4 @@ def build_dataset(config: Config, data_path: str | Path, split_file: Path, train
     cls = KittiOdometryDataset if d.dataset == "kitti_odom" else KittiRawDataset
     return cls(data_path, split_file, m.height, m.width, frame_ids=m.frame_ids, img_ext=d.img_ext, train=train,
                calib_intrinsics=d.calib_intrinsics, flip_prob=d.flip_prob, jitter_prob=d.jitter_prob,
-               seed=config.train.seed)
+               seed=config.train.seed, skip_incomplete=d.skip_incomplete)

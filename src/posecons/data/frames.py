@@ -9,11 +9,13 @@ Sample contract (the model relies on it):
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import torch
+from PIL import Image
 from torch.utils.data import Dataset
 
 from ..errors import PoseconsError
@@ -47,6 +49,7 @@ class FrameDataset(Dataset):
         jitter_prob: float = 0.5,
         seed: int = 0,
         check_files: bool = True,
+        skip_incomplete: bool = False,
     ) -> None:
         self.data_path = Path(data_path)
         self.lines: list[SplitLine] = read_split(split)
@@ -58,8 +61,11 @@ class FrameDataset(Dataset):
         self.flip_prob, self.jitter_prob = (flip_prob, jitter_prob) if train else (0.0, 0.0)
         self.seed = seed
         self.epoch = 0
+        self.skip_incomplete = skip_incomplete
         if check_files:
             self.check_files()
+        self._first = {(line.folder, line.side): line for line in reversed(self.lines)}  # first line per camera
+        self._sizes: dict[tuple[str, str], tuple[Path, tuple[int, int]]] = {}
 
     # -- what subclasses provide -------------------------------------------------------------
     def image_path(self, line: SplitLine, frame: int) -> Path:
@@ -72,16 +78,43 @@ class FrameDataset(Dataset):
 
     # -- shared logic -------------------------------------------------------------------------
     def check_files(self) -> None:
-        """Fail early, naming the split line, when a frame or its neighbours are missing."""
+        """Fail early, naming the split line, when a frame or its neighbours are missing; with
+        ``skip_incomplete``, drop such lines instead (e.g. near drive ends when the frame offsets
+        are wider than the split was made for) and say how many."""
+        complete = []
         for line in self.lines:
-            for offset in self.frame_ids:
-                path = self.image_path(line, line.frame + offset)
-                if not path.is_file():
-                    raise PoseconsError(f"{line.where}: frame {line.frame}{offset:+d} of '{line}' missing: {path}")
+            missing = [o for o in self.frame_ids if not self.image_path(line, line.frame + o).is_file()]
+            if not missing:
+                complete.append(line)
+            elif not self.skip_incomplete:
+                path = self.image_path(line, line.frame + missing[0])
+                raise PoseconsError(f"{line.where}: frame {line.frame}{missing[0]:+d} of '{line}' missing: {path} "
+                                    "(data.skip_incomplete=true drops such lines)")
+        if len(complete) < len(self.lines):
+            source = self.lines[0].where.rsplit(":", 1)[0]
+            print(f"{source}: dropped {len(self.lines) - len(complete)} of {len(self.lines)} lines whose frames "
+                  f"{list(self.frame_ids)} do not all exist (data.skip_incomplete)", file=sys.stderr)
+            self.lines = complete
+            if not complete:
+                raise PoseconsError(f"{source}: no line has all of its frames {list(self.frame_ids)}")
 
     def intrinsics(self, line: SplitLine) -> np.ndarray:
         """Normalised (3, 3) K: the calibrated one, or KITTI's fixed K when calibration is off."""
         return self.calib_k(line) if self.calib_intrinsics else KITTI_FIXED_K
+
+    def reference_size(self, line: SplitLine) -> tuple[Path, tuple[int, int]]:
+        """The image of the first split line of ``line``'s drive and camera, and its (width, height):
+        every frame of that drive must have this size (K is normalised by it)."""
+        key = (line.folder, line.side)
+        if key not in self._sizes:
+            first = self._first[key]
+            path = self.image_path(first, first.frame)
+            try:
+                with Image.open(path) as img:
+                    self._sizes[key] = (path, img.size)
+            except OSError as exc:
+                raise PoseconsError(f"{path}: unreadable image ({exc})") from exc
+        return self._sizes[key]
 
     def set_epoch(self, epoch: int) -> None:
         """Select the epoch whose augmentation draws ``__getitem__`` reproduces."""
@@ -90,10 +123,10 @@ class FrameDataset(Dataset):
     def __len__(self) -> int:
         return len(self.lines)
 
-    def load_frame(self, path: Path, flip: bool) -> torch.Tensor:
+    def load_frame(self, path: Path, flip: bool, like: tuple[Path, tuple[int, int]] | None = None) -> torch.Tensor:
         """Decode and resize exactly as evaluation and inference do (``resize_rgb``), then flip:
-        (3, H, W) float32 in [0, 1]."""
-        image = torch.from_numpy(resize_rgb(np.asarray(load_rgb(path)), self.height, self.width))
+        (3, H, W) float32 in [0, 1]; ``like``: see :func:`~posecons.data.io.load_rgb`."""
+        image = torch.from_numpy(resize_rgb(np.asarray(load_rgb(path, like=like)), self.height, self.width))
         return image.flip(-1) if flip else image
 
     def __getitem__(self, index: int) -> dict:
@@ -102,7 +135,8 @@ class FrameDataset(Dataset):
             flip, jitter = draw_augmentation(sample_rng(self.seed, self.epoch, index), self.flip_prob, self.jitter_prob)
         else:
             flip, jitter = False, np.array(IDENTITY_JITTER, dtype=np.float32)
-        frames = torch.stack([self.load_frame(self.image_path(line, line.frame + f), flip) for f in self.frame_ids])
+        like = self.reference_size(line)
+        frames = torch.stack([self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids])
         k = torch.from_numpy(self.intrinsics(line).astype(np.float32))
         return {
             "frames": frames,

@@ -1,4 +1,4 @@
-"""Ground-truth depth for evaluation (SPEC §8): LiDAR projection and KITTI's improved PNGs.
+"""Ground-truth depth for evaluation: LiDAR projection and KITTI's improved PNGs.
 
 Stored as one ``.npz`` without pickles: float32 (H, W) maps under keys ``000000``, ``000001``, …
 in split order (0 = no ground truth; sizes may differ between dates) and a unicode array
@@ -14,8 +14,9 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
+from ..fileio import atomic_file
 from .calib import raw_projection, velo_to_image
-from .io import atomic_file, load_velodyne, require_file
+from .io import load_velodyne, require_file
 from .splits import SIDE_TO_CAMERA, SplitSource, read_split
 
 DepthKind = Literal["velo_x", "camera_z"]
@@ -104,8 +105,10 @@ def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
         with np.load(path, allow_pickle=False) as data:
             lines = [str(s) for s in data["lines"]]
             maps = [data[f"{i:06d}"] for i in range(len(lines))]
-    except (OSError, KeyError, ValueError) as exc:
-        raise PoseconsError(f"{path}: not a posecons ground-truth file ({exc})") from exc
+    except KeyError as exc:
+        raise PoseconsError(f"{path}: not a posecons ground-truth file (no entry {exc})") from exc
+    except (OSError, ValueError) as exc:  # numpy's own text suggests unpickling, which is never wanted here
+        raise PoseconsError(f"{path}: not a posecons ground-truth file (not an .npz written by export-gt)") from exc
     return maps, lines
 
 

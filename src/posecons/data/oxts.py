@@ -79,6 +79,8 @@ def read_oxts(paths: list[Path]) -> np.ndarray:
             values = []
         if len(values) != len(OXTS_FIELDS):
             raise PoseconsError(f"{path}:1: expected {len(OXTS_FIELDS)} numbers in an OXTS packet")
+        if not np.isfinite(values).all():
+            raise PoseconsError(f"{path}:1: NaN or infinite number in an OXTS packet")
         rows.append(values)
     return np.asarray(rows, dtype=np.float64).reshape(-1, len(OXTS_FIELDS))
 

@@ -19,8 +19,9 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
+from ..fileio import output_dir
 from .calib import format_calib
-from .io import atomic_dir, load_rgb
+from .io import load_rgb
 from .splits import SplitLine, write_split
 
 DATE = "custom"
@@ -72,7 +73,7 @@ def prepare(
     if not inputs:
         raise PoseconsError("prepare: no inputs given")
     lines, counts, native = [], [], None
-    with atomic_dir(Path(out)) as tmp:
+    with output_dir(out) as tmp:
         for index, source in enumerate(map(Path, inputs)):
             folder = f"{DATE}/{DATE}_drive_{index:04d}_sync"
             data = tmp / folder / "image_02" / "data"

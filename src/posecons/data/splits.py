@@ -1,4 +1,4 @@
-"""Split files: one ``<folder> <frame> <side>`` line per sample (SPEC §7).
+"""Split files: one ``<folder> <frame> <side>`` line per sample.
 
 Raw KITTI lines name a drive folder (``2011_09_26/2011_09_26_drive_0002_sync``), odometry lines a
 sequence number (``9``). Eigen test lines pad frames to 10 digits; the frame value is what matters.
@@ -13,8 +13,11 @@ from pathlib import Path
 from typing import Union
 
 from ..errors import PoseconsError
-from .io import atomic_file, require_file
+from ..fileio import write_text
+from .io import require_file
 
+BUNDLED = Path(__file__).resolve().parents[1] / "splits"
+"""The standard KITTI split lists shipped with the package (origin in its NOTICE)."""
 SIDES = ("l", "r")
 SIDE_TO_CAMERA = {"l": 2, "r": 3}  # left / right colour camera
 
@@ -54,10 +57,29 @@ def parse_split_lines(lines: Iterable[str], source: str = "<lines>") -> list[Spl
 SplitSource = Union[str, Path, Sequence[str], Sequence[SplitLine]]
 
 
+def bundled_names() -> list[str]:
+    return sorted(p.name for p in BUNDLED.iterdir() if p.is_dir())
+
+
+def find_split_file(path: str | Path) -> Path:
+    """``path`` if it is a file, else a bundled split: ``eigen/test_files.txt``, or ``eigen`` for its
+    ``test_files.txt``."""
+    path = Path(path)
+    if path.is_file():
+        return path
+    bundled = BUNDLED / path
+    bundled = bundled / "test_files.txt" if bundled.is_dir() else bundled
+    if bundled.is_file():
+        return bundled
+    raise PoseconsError(f"{path}: split file not found (nor a bundled split: {', '.join(bundled_names())}, "
+                        "e.g. eigen or odom/test_files_09.txt)")
+
+
 def read_split(source: SplitSource) -> list[SplitLine]:
-    """Read a split file, or parse a list of lines / pass through a list of :class:`SplitLine`."""
+    """Read a split file (or a bundled one by name, see :func:`find_split_file`), or parse a list of
+    lines / pass through a list of :class:`SplitLine`."""
     if isinstance(source, (str, Path)):
-        path = require_file(Path(source), "split file")
+        path = find_split_file(source)
         return parse_split_lines(path.read_text().splitlines(), str(path))
     items = list(source)
     if items and isinstance(items[0], SplitLine):
@@ -68,8 +90,7 @@ def read_split(source: SplitSource) -> list[SplitLine]:
 def write_split(path: Path, lines: Iterable[SplitLine], frame_digits: int = 0) -> None:
     """Write split lines; ``frame_digits=10`` gives the eigen test style (``0000000069``)."""
     text = "".join(f"{s.folder} {s.frame:0{frame_digits}d} {s.side}\n" for s in lines)
-    with atomic_file(Path(path)) as tmp:
-        tmp.write_text(text)
+    write_text(path, text)
 
 
 def read_static_frames(path: Path) -> set[tuple[str, int]]:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PoseconsError
+from ..fileio import atomic_write
 from ..metrics.pose import quaternion_to_rotation, rotation_to_quaternion
 from .io import require_file
 
@@ -53,19 +54,20 @@ def read_kitti_poses(path: str | Path) -> np.ndarray:
             values = []
         if len(values) != 12:
             raise PoseconsError(f"{path}:{number}: expected 12 numbers, got {line.strip()[:60]!r}")
+        if not np.isfinite(values).all():
+            raise PoseconsError(f"{path}:{number}: NaN or infinite number in a pose")
         rows.append(values)
     poses = np.tile(np.eye(4), (len(rows), 1, 1))
     poses[:, :3, :] = np.asarray(rows).reshape(-1, 3, 4)
     if len(poses) == 0:
         raise PoseconsError(f"{path}: no KITTI poses found")
-    if not np.isfinite(poses).all():
-        raise PoseconsError(f"{path}: NaN or infinite values in KITTI poses")
     return poses
 
 
 def write_kitti_poses(path: str | Path, poses: np.ndarray) -> None:
     """Write (N, 4, 4) poses in the KITTI format (first 3 rows, row-major, 12 numbers a line)."""
-    np.savetxt(path, np.asarray(poses)[:, :3, :].reshape(-1, 12), fmt="%.9e")
+    rows = np.asarray(poses)[:, :3, :].reshape(-1, 12)
+    atomic_write(path, lambda tmp: np.savetxt(tmp, rows, fmt="%.9e"))
 
 
 def read_times(path: str | Path) -> np.ndarray:
@@ -80,7 +82,7 @@ def write_tum(path: str | Path, poses: np.ndarray, timestamps: np.ndarray | None
     if len(timestamps) != len(poses):
         raise PoseconsError(f"{len(timestamps)} timestamps for {len(poses)} poses")
     rows = np.column_stack([timestamps, poses[:, :3, 3], rotation_to_quaternion(poses[:, :3, :3])])
-    np.savetxt(path, rows, fmt="%.9f")
+    atomic_write(path, lambda tmp: np.savetxt(tmp, rows, fmt="%.9f"))
 
 
 def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

@@ -9,15 +9,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data import trajectory_io
+from ..cli import device_name, non_negative_int, output_file, output_folder, positive_int
 from ..errors import PoseconsError
+from ..fileio import atomic_write, write_json, write_text
+
+# metrics are light (numpy); the evaluation runs, torch and the data layer load inside the commands.
 from ..metrics import depth, pose
-from . import compare, evaluate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the evaluation sub-commands to the ``posecons`` parser."""
-    p = subparsers.add_parser("evaluate-depth", help="KITTI depth metrics and scale consistency (SPEC §9)",
+    p = subparsers.add_parser("evaluate-depth", help="KITTI depth metrics (Eigen protocol) and scale consistency",
                               description="Evaluate predicted disparities (or a model) against ground-truth depth.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--pred-disps", type=Path, metavar="P.npy",
@@ -27,43 +29,46 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "with --checkpoint it is exported on the fly when missing)")
     p.add_argument("--data-path", type=Path, help="KITTI raw root (with --checkpoint)")
     p.add_argument("--split-file", type=Path, help="split lines; gives the sequences (default: the GT's lines)")
-    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame", help="median scaling (default: frame)")
+    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame",
+                   help="median scaling per frame, per sequence, or none")
     p.add_argument("--gt-kind", choices=tuple(depth.CROP_FOR_GT_KIND), default="lidar",
-                   help="lidar: Garg crop, 1e-3 < gt < 80; improved: gt > 0, no crop (default: lidar)")
+                   help="lidar: Garg crop, 1e-3 < gt < 80 m; improved: gt > 0, no crop")
     p.add_argument("--post-process", action="store_true", help="average with the flipped image's prediction")
-    p.add_argument("--save-disps", type=Path, metavar="OUT.npy", help="save the model's disparities")
+    p.add_argument("--save-disps", type=output_file, metavar="OUT.npy", help="save the model's disparities")
     _add_model_options(p)
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the results as JSON")
-    p.add_argument("--plots", type=Path, metavar="DIR", help="write scale and error plots (PNG)")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
+    p.add_argument("--plots", type=output_folder, metavar="DIR", help="write scale and error plots (PNG)")
     p.set_defaults(func=evaluate_depth_command)
 
     p = subparsers.add_parser("evaluate-pose", help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
-                              description="Evaluate predicted ego-motion against KITTI odometry poses (SPEC §10).")
+                              description="Evaluate predicted ego-motion against KITTI odometry poses.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--pred-poses", type=Path, metavar="P.txt", help="KITTI pose file, camera → world")
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
     p.add_argument("--gt-poses", type=Path, required=True, metavar="G.txt", help="KITTI ground-truth pose file")
     p.add_argument("--data-path", type=Path, help="KITTI odometry root with sequences/ (with --checkpoint)")
-    p.add_argument("--sequence", help="odometry sequence, e.g. 09 (with --checkpoint)")
-    p.add_argument("--times", type=Path, help="times.txt for the TUM timestamps (default: frame / 10 Hz)")
+    p.add_argument("--sequence", type=non_negative_int, help="odometry sequence, e.g. 09 (with --checkpoint)")
+    p.add_argument("--times", type=Path, help="times.txt (seconds) for the TUM timestamps (default: frame / 10 Hz)")
     p.add_argument("--const-velocity", choices=pose.CONST_VELOCITY_MODES, default="first",
-                   help="baseline: repeat the first GT step, or the previous GT step (default: first)")
+                   help="baseline: repeat the first GT step, or the previous GT step")
     _add_model_options(p)
-    p.add_argument("--json", type=Path, metavar="OUT", help="write the results as JSON")
-    p.add_argument("--out-dir", type=Path, metavar="DIR", help="write trajectories (KITTI, TUM) and a top-view plot")
+    p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
+    p.add_argument("--out-dir", type=output_folder, metavar="DIR",
+                   help="write trajectories (KITTI, TUM) and a top-view plot")
     p.set_defaults(func=evaluate_pose_command)
 
     p = subparsers.add_parser("compare", help="Markdown table (paper's Table 1 layout) from depth JSONs",
                               description="Compare depth evaluations; a run directory means <run>/eval/depth.json.")
     p.add_argument("results", nargs="+", type=Path, metavar="RUN_OR_JSON")
     p.add_argument("--names", nargs="+", help="row names (default: run directory or file name)")
-    p.add_argument("--out", type=Path, metavar="FILE", help="also write the table to FILE")
+    p.add_argument("--out", type=output_file, metavar="FILE", help="also write the table to FILE")
     p.set_defaults(func=compare_command)
 
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--batch-size", type=int, default=8, help="images per forward pass (with --checkpoint)")
-    p.add_argument("--device", default=None, help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--batch-size", type=positive_int, default=8, help="images per forward pass (with --checkpoint)")
+    p.add_argument("--device", type=device_name, default=None,
+                   help="torch device (default: cuda if available, else cpu)")
 
 
 def _require(args: argparse.Namespace, *names: str) -> None:
@@ -93,6 +98,7 @@ def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray]
 def evaluate_depth_command(args: argparse.Namespace) -> int:
     from ..checkpoint import describe_checkpoint
     from ..data.splits import read_split
+    from . import compare, evaluate
 
     if args.checkpoint is None and args.gt is None:
         raise PoseconsError("--pred-disps needs --gt (an exported ground-truth .npz)")
@@ -112,7 +118,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
                                            args.post_process)
         pred_name = str(args.checkpoint)
         if args.save_disps:
-            np.save(args.save_disps, disps)
+            atomic_write(args.save_disps, lambda tmp: np.save(tmp, disps))
     else:
         disps, pred_name = evaluate.load_pred_disps(args.pred_disps), str(args.pred_disps)
 
@@ -126,13 +132,16 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
           f"scales: median {result['scale_median']:.3f}, std/median {result['scale_std_over_median']:.3f}, "
           f"σ/μ pooled {result['scale_cv_pooled']:.3f}")
     if args.json:
-        evaluate.write_json(args.json, result)
+        write_json(args.json, result)
     if args.plots:
         evaluate.write_depth_plots(result, split, args.plots)
     return 0
 
 
 def evaluate_pose_command(args: argparse.Namespace) -> int:
+    from ..data import trajectory_io
+    from . import compare, evaluate
+
     gt = trajectory_io.read_kitti_poses(args.gt_poses)
     times = trajectory_io.read_times(args.times) if args.times else None
     if times is not None and len(times) != len(gt):
@@ -163,18 +172,19 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         print(f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
               f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m")
     if args.json:
-        evaluate.write_json(args.json, result)
+        write_json(args.json, result)
     if args.out_dir:
         evaluate.write_trajectories(args.out_dir, estimate, gt, times)
     return 0
 
 
 def compare_command(args: argparse.Namespace) -> int:
+    from . import compare
+
     results = [compare.load_result(path) for path in args.results]
     names = args.names or [compare.default_name(path) for path in args.results]
     table = compare.markdown_table(results, names)
     print(table, end="")
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(table)
+        write_text(args.out, table)
     return 0

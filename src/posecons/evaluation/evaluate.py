@@ -5,8 +5,6 @@ the metrics of :mod:`posecons.metrics` with their provenance → JSON, plots and
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -47,8 +45,8 @@ def load_pred_disps(path: Path) -> np.ndarray:
         raise PoseconsError(f"{path}: predictions file not found")
     try:
         return np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise PoseconsError(f"{path}: not a readable .npy array ({exc})") from None
+    except (ValueError, OSError):  # numpy's own text suggests unpickling, which is never wanted here
+        raise PoseconsError(f"{path}: not a .npy array of numbers (damaged, or not written by numpy.save)") from None
 
 
 def depth_result(disps: np.ndarray, gts: Sequence[np.ndarray], lines: Sequence[SplitLine], scaling: str = "frame",
@@ -87,18 +85,4 @@ def write_trajectories(out_dir: Path, estimate: np.ndarray, gt: np.ndarray, time
     aligned, _ = align_trajectory(estimate, gt)
     plot_trajectory_topview(aligned, out_dir / "trajectory.png", gt, "prediction (Sim(3)-aligned)")
 
-
-def write_json(path: Path, result: dict) -> None:
-    """JSON with NaN written as null (strict JSON readers reject NaN)."""
-    def clean(value):
-        if isinstance(value, float) and not math.isfinite(value):
-            return None
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [clean(v) for v in value]
-        return value
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(clean(result), indent=2) + "\n")
 

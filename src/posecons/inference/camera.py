@@ -19,6 +19,8 @@ def parse_intrinsics(text: str) -> np.ndarray:
         fx, fy, cx, cy = (float(v) for v in text.split(","))
     except ValueError:
         raise PoseconsError(f"--intrinsics expects four comma-separated numbers fx,fy,cx,cy, got {text!r}") from None
+    if not np.isfinite([fx, fy, cx, cy]).all():
+        raise PoseconsError(f"--intrinsics: NaN or infinite value in {text!r}")
     if fx <= 0 or fy <= 0:
         raise PoseconsError(f"--intrinsics: focal lengths must be positive, got fx={fx}, fy={fy}")
     return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)

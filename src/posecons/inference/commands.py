@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from ..cli import device_name, non_negative_float, output_folder, positive_float, positive_int
 from .io import DEFAULT_FPS
 
 
@@ -17,39 +18,44 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint", required=True, type=Path,
                    help="checkpoint (.pt / .safetensors), an export directory or its depth.onnx")
     p.add_argument("--input", required=True, type=Path, help="an image, a folder of images or a video")
-    p.add_argument("--out", type=Path, default=Path("predictions"), help="output directory (default: predictions)")
-    p.add_argument("--batch-size", type=int, default=4)
-    p.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N")
+    p.add_argument("--out", type=output_folder, default="predictions",
+                   help="output folder: new, empty, or an earlier predict output")
+    p.add_argument("--batch-size", type=positive_int, default=4, help="frames per forward pass")
+    p.add_argument("--device", type=device_name, default="cpu", help="cpu, cuda or cuda:N")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--scale", type=float, help="multiply every depth and translation by this factor")
+    group.add_argument("--scale", type=positive_float, help="multiply every depth and translation by this factor")
     group.add_argument("--calibrate-gt", metavar="DIR|NPZ",
                        help="scale = median over the first frames of median(gt)/median(pred); a folder of 16-bit "
                             "depth PNGs named like the frames, or an export-gt .npz")
-    group.add_argument("--camera-height", type=float, metavar="METRES",
+    group.add_argument("--camera-height", type=positive_float, metavar="METRES",
                        help="scale from the camera's height above the ground plane fitted in the first frames")
-    p.add_argument("--calibrate-frames", type=int, default=10, metavar="N", help="frames used to calibrate (10)")
+    p.add_argument("--calibrate-frames", type=positive_int, default=10, metavar="N", help="frames used to calibrate")
     p.add_argument("--intrinsics", metavar="fx,fy,cx,cy", help="pixel intrinsics of the input images")
     p.add_argument("--calib", type=Path, help="KITTI calib_cam_to_cam.txt (P_rect_02) or odometry calib.txt (P2)")
     p.add_argument("--pointcloud", action="store_true", help="write a coloured PLY per frame")
-    p.add_argument("--every", type=int, default=1, metavar="K", help="point cloud of every K-th frame")
+    p.add_argument("--every", type=positive_int, default=1, metavar="K", help="point cloud of every K-th frame")
     p.add_argument("--ascii-ply", action="store_true", help="ASCII instead of binary PLY")
     p.add_argument("--no-trajectory", action="store_true", help="skip the pose network")
     p.add_argument("--no-video", action="store_true", help="no side-by-side MP4 for video input")
-    p.add_argument("--fps", type=float, default=DEFAULT_FPS, help="frame rate of image folders (timestamps)")
+    p.add_argument("--fps", type=positive_float, default=DEFAULT_FPS,
+                   help="frame rate of image folders in Hz (timestamps)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=predict_command)
 
     e = subparsers.add_parser("export", help="depth and pose networks to ONNX (verified) and safetensors")
-    e.add_argument("--checkpoint", required=True, type=Path)
-    e.add_argument("--out", required=True, type=Path)
-    e.add_argument("--tolerance", type=float, default=1e-4,
-                   help="largest accepted |ONNX Runtime − PyTorch| on sample inputs (default 1e-4)")
+    e.add_argument("--checkpoint", required=True, type=Path, help="checkpoint (.pt or .safetensors)")
+    e.add_argument("--out", required=True, type=output_folder, help="output folder: new, empty, or an earlier export")
+    e.add_argument("--tolerance", type=non_negative_float, default=1e-4,
+                   help="largest accepted |ONNX Runtime − PyTorch| on sample inputs (disparity / pose units)")
     e.set_defaults(func=export_command)
 
 
 def predict_command(args: argparse.Namespace) -> int:
-    from .backend import load_predictor
-    from .predict import PredictOptions, predict
+    from . import (  # the package's lazy names (not the submodule)
+        PredictOptions,
+        load_predictor,
+        predict,
+    )
 
     options = PredictOptions(
         batch_size=args.batch_size, scale=args.scale, calibrate_gt=args.calibrate_gt,

@@ -20,9 +20,9 @@ import torch.nn as nn
 
 from ..checkpoint import load_model, save_safetensors
 from ..errors import PoseconsError
+from ..fileio import output_dir
 from ..geometry import pose_vec_to_mat
 from .backend import DEPTH_ONNX, EXPORT_INFO, POSE_ONNX
-from .io import staged_output
 
 OPSET = 17
 WEIGHTS = "weights.safetensors"
@@ -83,7 +83,7 @@ def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-
     generator = torch.Generator().manual_seed(0)
     sample = torch.rand(3, batch, 3, h, w, generator=generator)
     depth, pose = DepthGraph(model), PoseGraph(model)
-    with staged_output(Path(out)) as tmp:
+    with output_dir(out) as tmp:
         _export(depth, (sample[0, :1],), tmp / DEPTH_ONNX, ["images"], ["disparity"])
         _export(pose, (sample[1, :1], sample[2, :1]), tmp / POSE_ONNX, ["image_a", "image_b"], ["pose", "matrix"])
         diffs = {"depth": _max_diff(depth, tmp / DEPTH_ONNX, {"images": sample[0]}),

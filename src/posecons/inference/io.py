@@ -1,5 +1,5 @@
 """Frame sources (one image, a folder of images, a video) that stream decoded frames, the
-side-by-side video writer, and the staged output directory of a prediction run.
+side-by-side video writer.
 
 Sources can be iterated more than once (each pass re-opens the file), so scale calibration can
 look at the first frames before the main pass without holding a video in memory.
@@ -7,10 +7,6 @@ look at the first frames before the main pass without holding a video in memory.
 
 from __future__ import annotations
 
-import contextlib
-import os
-import shutil
-import tempfile
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from fractions import Fraction
@@ -159,24 +155,3 @@ class SideBySideWriter:
         for packet in self.stream.encode():
             self.container.mux(packet)
         self.container.close()
-
-
-@contextlib.contextmanager
-def staged_output(out: Path) -> Iterator[Path]:
-    """Yield a temporary directory inside ``out``; on success move each of its entries into ``out``
-    (replacing entries of the same name), on error delete it. ``out`` never shows partial results
-    under the final names."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise PoseconsError(f"{out}: output path exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))
-    try:
-        yield tmp
-        for entry in sorted(tmp.iterdir()):
-            target = out / entry.name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target)
-            os.replace(entry, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)

@@ -4,7 +4,7 @@ Frames stream through in batches: each is resized to the network size, its dispa
 bilinearly back to the original size and inverted, and the sequence's single scale is applied.
 Scale calibration (if any) runs first over the first frames only, then the main pass writes
 everything into a staging folder inside OUT that is moved into place at the end (see
-:func:`posecons.inference.io.staged_output`).
+:func:`posecons.fileio.output_dir`).
 
 Output layout (``<name>`` is the image stem, or the 6-digit frame index of a video)::
 
@@ -33,13 +33,14 @@ from ..data.calib import normalised_to_pixel
 from ..data.gt import GroundTruth
 from ..data.trajectory_io import write_kitti_poses, write_tum
 from ..errors import PoseconsError
+from ..fileio import output_dir
 from ..metrics.depth import drift_stats, frame_scale, resize_disparity
 from ..metrics.pose import global_from_relative
 from ..plots import colorize, plot_scale_drift, plot_trajectory_topview
 from . import scale as scaling
 from .backend import Predictor, StepChain, predict_batches
 from .camera import resolve_intrinsics
-from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter, staged_output
+from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter
 from .pointcloud import depth_to_points, write_ply
 
 
@@ -135,7 +136,7 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
     s = result.value
     fps = source.video_fps if source.is_video else options.fps
 
-    with staged_output(Path(out)) as tmp:
+    with output_dir(out) as tmp:
         folders = ["depth", "depth_png", "depth_color"] + (["pointcloud"] if options.pointcloud else [])
         for name in folders:
             (tmp / name).mkdir()

@@ -11,8 +11,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from ..errors import PoseconsError
 
@@ -53,6 +51,9 @@ def resize_disparity(disp: np.ndarray, height: int, width: int) -> np.ndarray:
     """Bilinearly resize a (h, w) disparity to (height, width), half-pixel centres (align_corners=False)."""
     if disp.shape == (height, width):
         return np.asarray(disp, dtype=np.float32)
+    import torch  # here, not at the top: the CLI reads this module's constants without torch
+    import torch.nn.functional as F
+
     t = torch.as_tensor(np.asarray(disp, dtype=np.float32))[None, None]
     return F.interpolate(t, size=(height, width), mode="bilinear", align_corners=False)[0, 0].numpy()
 

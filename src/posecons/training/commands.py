@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from ..cli import non_negative_int, output_folder, positive_int
 from ..config import load_config, resolve_preset
 from ..errors import PoseconsError
 
@@ -18,23 +19,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node.")
     p.add_argument("--config", help="preset file or bundled name (e.g. kitti/cycle); default on --resume: the run's")
     p.add_argument("--data-path", required=True, help="dataset root (KITTI raw layout, or odometry root)")
-    p.add_argument("--out", required=True, help="run directory")
+    p.add_argument("--out", type=output_folder, required=True, help="run directory")
     p.add_argument("--split-dir", help="folder with train_files.txt/val_files.txt (default DATA/splits/<data.split>)")
-    p.add_argument("--max-steps", type=int, help="stop after this many optimiser steps")
+    p.add_argument("--max-steps", type=non_negative_int,
+                   help="stop after this many optimiser steps (default: train.max_steps)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set loss.constraints=[cyc] (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue RUN/checkpoints/last.pt exactly")
-    p.add_argument("--devices", type=int, default=1, help="processes (GPUs) per node")
-    p.add_argument("--nodes", type=int, default=1)
+    p.add_argument("--devices", type=positive_int, default=1, help="processes (one GPU each) per node")
+    p.add_argument("--nodes", type=positive_int, default=1, help="machines taking part; each runs this command")
     p.add_argument("--rdzv-endpoint", help="HOST:PORT of the rendezvous for --nodes > 1")
-    p.add_argument("--accelerator", choices=("auto", "cpu", "cuda"), default="auto")
-    p.add_argument("--precision", choices=("32", "bf16", "16"), help="mixed precision: bf16 (GPU or CPU) or 16 (GPU)")
+    p.add_argument("--accelerator", choices=("auto", "cpu", "cuda"), default="auto",
+                   help="auto: CUDA when a GPU is visible, else the CPU")
+    p.add_argument("--precision", choices=("32", "bf16", "16"),
+                   help="mixed precision: bf16 (GPU or CPU) or 16 (GPU) (default: train.precision)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=train_command)
 
     d = subparsers.add_parser("demo", help="synthetic data → train on the CPU → evaluate → report with plots")
-    d.add_argument("--out", default="runs/demo")
-    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--out", type=output_folder, default="runs/demo",
+                   help="folder for data, run, evaluation and report.md")
+    d.add_argument("--seed", type=non_negative_int, default=0, help="seed of the synthetic data and of training")
     d.set_defaults(func=demo_command)
 
 

@@ -23,6 +23,7 @@ from ..data.synth import generate_synth
 from ..data.trajectory_io import read_kitti_poses
 from ..evaluation import evaluate
 from ..evaluation.compare import checkpoint_note
+from ..fileio import write_json, write_text
 from ..inference.backend import load_predictor
 from ..metrics.pose import global_from_relative
 from ..model import PoseConsModel
@@ -82,7 +83,7 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     gt = ev / "gt_test.npz"
     export_gt(data, test_split, gt)
     before = _evaluate_depth(untrained, data, test_split, gt)
-    evaluate.write_json(ev / "depth_untrained.json", before)
+    write_json(ev / "depth_untrained.json", before)
 
     print("[3/5] training (synth/demo preset, cycle constraint) on the CPU", flush=True)
     shutil.rmtree(run, ignore_errors=True)
@@ -95,9 +96,9 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
 
     print("[4/5] evaluating depth (Eigen metrics, σ/μ) and pose (ATE) on the held-out drives", flush=True)
     depth = {**_evaluate_depth(ckpt, data, test_split, gt, plots), "checkpoint": weights}
-    evaluate.write_json(ev / "depth.json", depth)
+    write_json(ev / "depth.json", depth)
     pose = {**_evaluate_pose(ckpt, data / "odometry", odom_seq, plots), "checkpoint": weights}
-    evaluate.write_json(ev / "pose.json", pose)
+    write_json(ev / "pose.json", pose)
     validations = _read_jsonl(run / "metrics.jsonl")
     if validations:
         plot_validation(validations, plots / "validation.png")
@@ -114,8 +115,8 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
         "checkpoint": weights, "train_minutes": train_minutes, "minutes": (time.time() - start) / 60,
         "config": config.to_dict(),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "report.md").write_text(_report(summary, depth, before, pose, odom_seq, meta))
+    write_json(out / "summary.json", summary)
+    write_text(out / "report.md", _report(summary, depth, before, pose, odom_seq, meta))
     return summary
 
 

@@ -14,16 +14,24 @@ that torchrun sets. The run directory holds everything of a run::
 Resume is exact: the data order of an epoch is a pure function of (seed, epoch), augmentation
 draws of (seed, epoch, index), and the RNG states are saved, so an interrupted run that is
 resumed ends with the same weights as an uninterrupted one (in deterministic mode).
+
+SIGINT (Ctrl-C) or SIGTERM (what schedulers send before killing a job) stops the run at the next
+step boundary: ``last.pt`` is written and :class:`~posecons.errors.Interrupted` says how to resume.
+A second signal stops at once. A run that fails or is stopped before it saved any state leaves
+nothing behind in a run folder that was new or empty.
 """
 
 from __future__ import annotations
 
 import contextlib
 import copy
-import json
 import math
 import os
 import random
+import shutil
+import signal
+import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +48,8 @@ from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
 from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
-from ..errors import PoseconsError
+from ..errors import Interrupted, PoseconsError
+from ..fileio import remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .validation import Validator
 
@@ -69,6 +78,39 @@ def init_distributed(accelerator: str) -> tuple[Dist, torch.device]:
     if env.world > 1 and not dist.is_initialized():
         dist.init_process_group("nccl" if use_cuda else "gloo")
     return env, device
+
+
+class StopRequest:
+    """SIGINT/SIGTERM during the training loop ask it to stop at the next step boundary, where the
+    state is consistent and a resume exact; before the loop, or a second time, they stop at once."""
+
+    def __init__(self) -> None:
+        self.signum = 0
+        self.in_loop = False
+        self.pid = os.getpid()
+
+    def _handle(self, signum: int, frame) -> None:
+        if os.getpid() != self.pid:  # a forked DataLoader worker: it keeps loading, the trainer decides
+            return
+        name = signal.Signals(signum).name
+        if self.in_loop and not self.signum:
+            self.signum = signum
+            print(f"\n{name}: stopping after this step (send it again to stop at once)", file=sys.stderr, flush=True)
+            return
+        raise Interrupted(f"stopped by {name}", signum)
+
+    @contextlib.contextmanager
+    def installed(self):
+        if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
+            yield self
+            return
+        previous = {s: signal.signal(s, self._handle) for s in (signal.SIGINT, signal.SIGTERM)
+                    if signal.getsignal(s) is not signal.SIG_IGN}  # e.g. SIGINT under nohup stays ignored
+        try:
+            yield self
+        finally:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
 
 
 def _prepare_run_dir(out: Path, resume: bool) -> None:
@@ -103,13 +145,14 @@ class Trainer:
         self.train_set = build_dataset(config, data_path, train_file, train=True)
         if len(self.train_set) < t.batch_size * self.env.world:
             raise PoseconsError(f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
-                                f"({t.batch_size} × {self.env.world} processes)")
+                                f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
+                                "more data (`posecons synth` prints how many training lines it wrote)")
         # Validation (and its one-off ground-truth export) happens on the main rank only.
         self.validator = (Validator(config, data_path, val_file, self.out, self.device)
-                          if val_file and self.env.main else None)
-        if t.best_metric == "abs_rel" and self.env.main and not (self.validator and self.validator.gt is not None):
+                          if val_file and t.val_every != "off" and self.env.main else None)
+        if t.best_metric == "abs_rel" and self.validator is not None and self.validator.gt is None:
             raise PoseconsError("train.best_metric=abs_rel selects best.pt by ground truth, but the validation split "
-                                f"{val_file or '(none)'} has no LiDAR scans; use train.best_metric=val_photometric")
+                                f"{val_file} has no LiDAR scans; use train.best_metric=val_photometric")
 
         # A resumed run takes its weights from last.pt: nothing is downloaded, so it also resumes offline.
         model = PoseConsModel(_without_imagenet(config) if resume else config).to(self.device)
@@ -127,10 +170,15 @@ class Trainer:
         self.steps_per_epoch = len(self.train_set) // (t.batch_size * self.env.world * t.grad_accum)
         self.step = self.epoch = self.batch_in_epoch = self.bad_steps = self.skipped_steps = 0
         self.best = math.inf  # best validation value of train.best_metric so far
+        self.seconds_before = 0.0  # training time of the earlier sessions of a resumed run
+        self.session_start = time.time()
+        self.stop = StopRequest()  # `train` installs it as the signal handler
         if resume:
+            if self.env.main:  # a checkpoint being written when the run was killed
+                remove_temporaries(self.out / "checkpoints")
             self._load(self.out / "checkpoints" / "last.pt")
         elif self.env.main:
-            (self.out / "config.yaml").write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
+            write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         if not self.quiet:
             print(f"initialisation: {self.initialisation}; best.pt selected by {describe_selection(t.best_metric)}")
         self.writer = None
@@ -150,12 +198,18 @@ class Trainer:
             "scaler": self.scaler.state_dict(), "step": self.step, "epoch": self.epoch,
             "batch_in_epoch": self.batch_in_epoch, "bad_steps": self.bad_steps, "skipped_steps": self.skipped_steps,
             "best": self.best, "initialisation": self.initialisation,
+            "train_seconds": self.seconds_before + time.time() - self.session_start,
             "rng": {"torch": torch.get_rng_state(), "python": random.getstate(),
                     "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else []},
         }
 
     def _load(self, path: Path) -> None:
         state = load_checkpoint(path, map_location=self.device)
+        missing = [k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng")
+                   if k not in state]
+        if missing:
+            raise PoseconsError(f"{path}: holds no training state ({', '.join(missing)} missing); --resume "
+                                "needs the checkpoints/last.pt that a run writes")
         saved, requested = _without_imagenet(state["config"])["model"], _without_imagenet(self.config.to_dict())["model"]
         if saved != requested:
             raise PoseconsError(f"{path}: its model config {saved} differs from the requested "
@@ -172,6 +226,7 @@ class Trainer:
         for key in ("step", "epoch", "batch_in_epoch", "bad_steps", "skipped_steps"):
             setattr(self, key, int(state[key]))
         self.best = float(state["best"])
+        self.seconds_before = float(state.get("train_seconds", 0.0))  # absent in checkpoints of older versions
         if self.env.world == 1:  # per-rank RNG streams are only saved for rank 0
             torch.set_rng_state(state["rng"]["torch"].cpu())
             random.setstate(_as_tuple(state["rng"]["python"]))
@@ -220,17 +275,63 @@ class Trainer:
         dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.config.train.precision)
         return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None)
 
+    @property
+    def _val_steps(self) -> int:
+        """Steps between validations; 0 when validation is per epoch or off."""
+        every = self.config.train.val_every
+        return every if isinstance(every, int) else 0
+
     def total_steps(self) -> int:
         t = self.config.train
         full = self.steps_per_epoch * t.epochs
         return min(full, t.max_steps) if t.max_steps else full
 
     def fit(self) -> dict[str, Any]:
-        t = self.config.train
         total = self.total_steps()
         bar = tqdm(total=total, initial=self.step, disable=self.quiet, dynamic_ncols=True, unit="step")
-        start, last_metrics = time.time(), {}
+        last_metrics = {}
+        self.session_start = time.time()
         self.ddp.train()
+        self.stop.in_loop = True
+        try:
+            last_metrics = self._loop(total, bar)
+        except Exception:
+            if self.stop.signum:  # a DataLoader worker that the same signal ended broke the loop
+                self._stop_now()
+            raise
+        finally:
+            self.stop.in_loop = False
+            bar.close()
+        if self._val_steps and self.step % self._val_steps:
+            last_metrics = self.validate()
+        seconds = time.time() - self.session_start
+        summary = {"steps": self.step, "epochs": self.epoch, "skipped_steps": self.skipped_steps,
+                   "minutes": (self.seconds_before + seconds) / 60, "minutes_this_session": seconds / 60,
+                   "initialisation": self.initialisation, "best_metric": self.config.train.best_metric,
+                   "last_validation": last_metrics}
+        if self.writer:
+            self.writer.close()
+        return summary
+
+    def _stop_requested(self) -> bool:
+        """True once a signal asked to stop; every rank must agree, or the others would wait forever."""
+        if self.env.world == 1:
+            return bool(self.stop.signum)
+        flag = torch.tensor([self.stop.signum], device=self.device)
+        dist.all_reduce(flag, op=dist.ReduceOp.MAX)
+        self.stop.signum = int(flag.item())
+        return bool(self.stop.signum)
+
+    def _stop_now(self) -> None:
+        self.save()
+        name = signal.Signals(self.stop.signum).name
+        raise Interrupted(f"stopped by {name} at step {self.step}; the state is saved in "
+                          f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
+                          self.stop.signum)
+
+    def _loop(self, total: int, bar) -> dict[str, Any]:
+        """The epochs and steps from the current position to ``total``; returns the last validation."""
+        t, last_metrics = self.config.train, {}
         while self.step < total and self.epoch < t.epochs:
             micro = 0
             for batch in self._loader(self.epoch, self.batch_in_epoch * t.grad_accum):
@@ -244,29 +345,23 @@ class Trainer:
                 if losses is not None:
                     bar.set_postfix({k: f"{v:.3g}" for k, v in losses.items()}, refresh=False)
                     self._log(losses, batch, outputs)
-                if t.val_every and self.step % t.val_every == 0:
+                if self._val_steps and self.step % self._val_steps == 0:
                     last_metrics = self.validate()
                 if t.checkpoint_every and self.step % t.checkpoint_every == 0:
                     self.save()
+                if self._stop_requested():
+                    self._stop_now()
                 if self.step >= total or self.batch_in_epoch >= self.steps_per_epoch:
                     break
             if self.batch_in_epoch >= self.steps_per_epoch:  # epoch complete
                 self.epoch += 1
                 self.batch_in_epoch = 0
                 self.scheduler.step()
-                if not t.val_every:
+                if t.val_every == "epoch":
                     last_metrics = self.validate()
                 self._save_epoch()
             self.save()
-        bar.close()
-        if t.val_every and self.step % t.val_every:
-            last_metrics = self.validate()
-        summary = {"steps": self.step, "epochs": self.epoch, "skipped_steps": self.skipped_steps,
-                   "minutes": (time.time() - start) / 60, "initialisation": self.initialisation,
-                   "best_metric": t.best_metric, "last_validation": last_metrics}
-        if self.writer:
-            self.writer.close()
-        return summary
+        return last_metrics
 
     def _micro_step(self, batch: dict, last: bool) -> tuple[dict[str, float] | None, dict]:
         """Forward/backward of one micro-batch; the optimiser steps on the last of ``grad_accum``.
@@ -365,6 +460,16 @@ def use_deterministic_algorithms(device: torch.device) -> None:
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
         torch.backends.cudnn.benchmark = False
     torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
+def _discard(out: Path, created: list[Path]) -> None:
+    """Remove what a run that never saved a state wrote into its new or empty folder, and the folder
+    and parents this call created."""
+    if out.is_dir():
+        for entry in out.iterdir():
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+    remove_empty(created)
 
 
 def _as_tuple(value):
@@ -375,10 +480,22 @@ def _as_tuple(value):
 def train(config: Config, data_path: str | Path, out: str | Path, split_dir: str | Path | None = None,
           resume: bool = False, accelerator: str = "auto", quiet: bool = False) -> dict[str, Any]:
     """Train a run and return a summary (steps, minutes, last validation metrics)."""
-    trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
-    summary = trainer.fit()
+    out = Path(out)
+    main = int(os.environ.get("RANK", 0)) == 0
+    fresh = main and not (out.exists() and any(out.iterdir()))  # then everything in it is this run's
+    created = [p for p in [out, *out.parents] if not p.exists()][::-1] if fresh else []  # made by the Trainer
+    stop = StopRequest()
+    with stop.installed():
+        try:
+            trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+            trainer.stop = stop
+            summary = trainer.fit()
+        except BaseException:
+            if fresh and not (out / "checkpoints" / "last.pt").exists():
+                _discard(out, created)
+            raise
     if trainer.env.main:
-        (Path(out) / "train_summary.json").write_text(json.dumps(summary, indent=2))
+        write_json(Path(out) / "train_summary.json", summary)
     if dist.is_initialized():
         dist.barrier()
         dist.destroy_process_group()

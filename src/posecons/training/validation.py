@@ -6,7 +6,6 @@ Ground truth is exported once per run (``RUN/val_gt.npz``), never per training s
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,7 @@ from torch.utils.data import DataLoader, Subset
 from ..config import Config
 from ..data.datasets import build_dataset
 from ..data.gt import export_gt, load_gt
+from ..fileio import append_record, write_json
 from ..geometry import disp_to_depth
 from ..metrics.depth import evaluate_depth
 
@@ -62,8 +62,6 @@ class Validator:
             result = evaluate_depth(np.concatenate(disps), self.gt, folders)
             metrics.update({k: result[k] for k in ("abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3",
                                                    "scale_cv", "scale_cv_pooled", "n_frames")})
-        (self.out / "metrics").mkdir(exist_ok=True)
-        (self.out / "metrics" / f"step_{step:06d}.json").write_text(json.dumps(metrics, indent=2))
-        with open(self.out / "metrics.jsonl", "a") as f:
-            f.write(json.dumps(metrics) + "\n")
+        write_json(self.out / "metrics" / f"step_{step:06d}.json", metrics)
+        append_record(self.out / "metrics.jsonl", metrics)  # a resumed run replaces the rows it repeats
         return metrics

@@ -19,6 +19,7 @@ import json
 import multiprocessing
 import os
 import shutil
+import signal
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -27,8 +28,8 @@ import numpy as np
 from PIL import Image
 
 from ...errors import PoseconsError
+from ...fileio import output_dir
 from ..calib import format_calib
-from ..io import atomic_dir
 from ..oxts import DATAFORMAT, format_oxts, poses_to_oxts
 from ..splits import SplitLine, write_split
 from ..trajectory_io import write_kitti_poses
@@ -181,7 +182,7 @@ def generate_synth(
     test_ids = list(range(drives - n_test, drives))
     rng = np.random.default_rng([seed, 2_000_003])
     train_lines, test_lines, static = [], [], {}
-    with atomic_dir(Path(out)) as tmp:
+    with output_dir(out) as tmp:
         date_dir, odometry = tmp / DATE, tmp / "odometry"
         date_dir.mkdir()
         (date_dir / "calib_cam_to_cam.txt").write_text(format_calib(rig.cam_to_cam_text()))
@@ -242,7 +243,14 @@ def _render_drive(job: _Job, frames: int, workers: int) -> None:
     _JOB = job
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            with multiprocessing.get_context("fork").Pool(workers) as pool:
+            # Ctrl-C reaches the whole process group: the workers are forked with it blocked (a worker
+            # that died of it would hang the pool), the parent receives it once they exist and stops them.
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                pool = multiprocessing.get_context("fork").Pool(workers)
+            finally:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+            with pool:
                 pool.map(_render_frame, range(frames), chunksize=max(1, frames // (4 * workers)))
         else:
             for frame in range(frames):
