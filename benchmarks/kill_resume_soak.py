@@ -26,16 +26,39 @@ import torch
 
 from posecons.checkpoint import load_checkpoint
 
-SETTINGS = ["data.split=synth", "model.height=64", "model.width=192", "model.num_layers=10",
-            "model.pretrained=false", "train.batch_size=2", "data.num_workers=0", "train.deterministic=true",
-            "train.checkpoint_every=3", "train.val_every=4", "train.val_samples=2", "train.image_every=0",
-            "loss.constraints=[fb,id,cyc]"]
+SETTINGS = [
+    "data.split=synth",
+    "model.height=64",
+    "model.width=192",
+    "model.num_layers=10",
+    "model.pretrained=false",
+    "train.batch_size=2",
+    "data.num_workers=0",
+    "train.deterministic=true",
+    "train.checkpoint_every=3",
+    "train.val_every=4",
+    "train.val_samples=2",
+    "train.image_every=0",
+    "loss.constraints=[fb,id,cyc]",
+]
 
 
 def command(data: Path, out: Path, steps: int, resume: bool) -> list[str]:
     sets = sum([["--set", s] for s in SETTINGS + [f"train.max_steps={steps}"]], [])
-    return [sys.executable, "-m", "posecons.cli", "train", "--config", "kitti/baseline", "--data-path", str(data),
-            "--out", str(out), "--quiet", *sets] + (["--resume"] if resume else [])
+    return [
+        sys.executable,
+        "-m",
+        "posecons.cli",
+        "train",
+        "--config",
+        "kitti/baseline",
+        "--data-path",
+        str(data),
+        "--out",
+        str(out),
+        "--quiet",
+        *sets,
+    ] + (["--resume"] if resume else [])
 
 
 def main() -> int:
@@ -51,9 +74,27 @@ def main() -> int:
         tmp = Path(tmp)
         data = args.data or tmp / "data"
         if args.data is None:
-            subprocess.run([sys.executable, "-m", "posecons.cli", "synth", "--out", str(data), "--drives", "2",
-                            "--frames", "20", "--width", "192", "--height", "64"], check=True, env=env,
-                           stdout=subprocess.DEVNULL)
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "posecons.cli",
+                    "synth",
+                    "--out",
+                    str(data),
+                    "--drives",
+                    "2",
+                    "--frames",
+                    "20",
+                    "--width",
+                    "192",
+                    "--height",
+                    "64",
+                ],
+                check=True,
+                env=env,
+                stdout=subprocess.DEVNULL,
+            )
         start = time.time()
         subprocess.run(command(data, tmp / "reference", args.steps, False), check=True, env=env)
         training = json.loads((tmp / "reference" / "train_summary.json").read_text())["minutes"] * 60
@@ -62,8 +103,7 @@ def main() -> int:
         run, last, kills = tmp / "killed", tmp / "killed" / "checkpoints" / "last.pt", []
         targets = sorted(rng.uniform(0, args.steps) for _ in range(args.kills))  # progress at each kill
         while len(kills) < args.kills:
-            proc = subprocess.Popen(command(data, run, args.steps, last.is_file()), env=env,
-                                    stderr=subprocess.DEVNULL)
+            proc = subprocess.Popen(command(data, run, args.steps, last.is_file()), env=env, stderr=subprocess.DEVNULL)
             ahead = targets[len(kills)] - (load_checkpoint(last)["step"] if last.is_file() else 0)
             # kill at the drawn progress, or at a random moment of the start-up when the run is past it
             delay = startup + ahead * per_step if ahead > 0 else rng.uniform(0, startup)
@@ -73,8 +113,9 @@ def main() -> int:
             except subprocess.TimeoutExpired:
                 proc.send_signal(signal.SIGKILL)
                 proc.wait()
-            kills.append({"after_s": round(delay, 1),
-                          "saved_step": load_checkpoint(last)["step"] if last.is_file() else None})
+            kills.append(
+                {"after_s": round(delay, 1), "saved_step": load_checkpoint(last)["step"] if last.is_file() else None}
+            )
         stray = sorted(p.name for p in last.parent.glob(".*")) if last.parent.is_dir() else []
         subprocess.run(command(data, run, args.steps, last.is_file()), check=True, env=env)
 
@@ -82,9 +123,18 @@ def main() -> int:
         resumed = load_checkpoint(last)["model"]
         identical = all(torch.equal(reference[k], resumed[k]) for k in reference)
         steps = [json.loads(line)["step"] for line in (run / "metrics.jsonl").read_text().splitlines()]
-        print(json.dumps({"kills": len(kills), "kill_points": kills, "steps": args.steps,
-                          "weights_identical": identical, "metrics_rows_unique": len(steps) == len(set(steps)),
-                          "temporaries_left_by_kills": stray}))
+        print(
+            json.dumps(
+                {
+                    "kills": len(kills),
+                    "kill_points": kills,
+                    "steps": args.steps,
+                    "weights_identical": identical,
+                    "metrics_rows_unique": len(steps) == len(set(steps)),
+                    "temporaries_left_by_kills": stray,
+                }
+            )
+        )
     return 0 if identical else 1
 
 

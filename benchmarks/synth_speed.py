@@ -29,13 +29,17 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "synth"
         start, cpu0 = time.perf_counter(), _cpu_seconds()
-        generate_synth(out, args.drives, args.frames, seed=0, width=args.width, height=args.height, workers=args.workers)
+        generate_synth(
+            out, args.drives, args.frames, seed=0, width=args.width, height=args.height, workers=args.workers
+        )
         seconds, cpu = time.perf_counter() - start, _cpu_seconds() - cpu0
         size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file() and "odometry" not in p.parts)
     frames = args.drives * args.frames
-    print(f"synth {args.drives} drives x {args.frames} frames at {args.width}x{args.height}: "
-          f"wall {seconds:.1f} s, CPU {cpu:.1f} s ({cpu / frames * 1000:.0f} ms/frame; {os.cpu_count()} CPUs, "
-          f"load average {os.getloadavg()[0]:.1f}), {size / 1e6:.0f} MB")
+    print(
+        f"synth {args.drives} drives x {args.frames} frames at {args.width}x{args.height}: "
+        f"wall {seconds:.1f} s, CPU {cpu:.1f} s ({cpu / frames * 1000:.0f} ms/frame; {os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.1f}), {size / 1e6:.0f} MB"
+    )
 
 
 def _cpu_seconds() -> float:

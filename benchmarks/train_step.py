@@ -23,17 +23,26 @@ VARIANTS = {"baseline": [], "fb": ["fb"], "id": ["id"], "cyc": ["cyc"], "all": [
 
 
 def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
-    cfg = load_config(overrides=[f"model.height={args.height}", f"model.width={args.width}",
-                                 f"model.num_layers={args.layers}", "model.pretrained=false",
-                                 f"loss.constraints=[{','.join(constraints)}]"])
+    cfg = load_config(
+        overrides=[
+            f"model.height={args.height}",
+            f"model.width={args.width}",
+            f"model.num_layers={args.layers}",
+            "model.pretrained=false",
+            f"loss.constraints=[{','.join(constraints)}]",
+        ]
+    )
     torch.manual_seed(0)
     device = torch.device(args.device)
     model = PoseConsModel(cfg).to(device).train()
     optim = torch.optim.Adam(model.parameters(), lr=1e-4)
-    batch = {"frames": torch.rand(args.batch, 3, 3, args.height, args.width, device=device),
-             "intrinsics": torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], device=device)
-             .expand(args.batch, 3, 3).contiguous(),
-             "color_aug": torch.tensor([1.1, 0.9, 1.05, 0.02], device=device).expand(args.batch, 4).contiguous()}
+    batch = {
+        "frames": torch.rand(args.batch, 3, 3, args.height, args.width, device=device),
+        "intrinsics": torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], device=device)
+        .expand(args.batch, 3, 3)
+        .contiguous(),
+        "color_aug": torch.tensor([1.1, 0.9, 1.05, 0.02], device=device).expand(args.batch, 4).contiguous(),
+    }
     times = []
     for i in range(args.warmup + args.steps):
         if device.type == "cuda":
@@ -63,8 +72,10 @@ def main() -> None:
     p.add_argument("--bf16", action="store_true", help="autocast the networks to bfloat16")
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     args = p.parse_args()
-    print(f"ResNet-{args.layers}, {args.height}×{args.width}, batch {args.batch}, {args.device}, "
-          f"torch {torch.__version__}, {torch.get_num_threads()} threads, median of {args.steps} steps")
+    print(
+        f"ResNet-{args.layers}, {args.height}×{args.width}, batch {args.batch}, {args.device}, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, median of {args.steps} steps"
+    )
     print("| variant | step (s) | overhead vs baseline |\n|---|---|---|")
     base = None
     for name in args.variants:

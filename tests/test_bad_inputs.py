@@ -25,7 +25,8 @@ from posecons.model import PoseConsModel
 
 TINY = ["model.height=64", "model.width=96", "model.num_layers=10", "model.pretrained=false"]
 TRAIN = "train --config kitti/baseline --data-path {syn} --out {out} --quiet " + " ".join(
-    f"--set {s}" for s in TINY + ["data.split=synth", "train.batch_size=2", "data.num_workers=0", "train.max_steps=1"])
+    f"--set {s}" for s in TINY + ["data.split=synth", "train.batch_size=2", "data.num_workers=0", "train.max_steps=1"]
+)
 DRIVE = "2020_01_01/2020_01_01_drive_0000_sync"
 
 
@@ -75,8 +76,20 @@ def world(make_synth, tmp_path_factory) -> dict[str, Path]:
     (inp / "two_times.txt").write_text("0\n0.1\n")
     (inp / "static.txt").write_text("2011_09_26 drive_0001 not-a-frame\n")
     (inp / "result.json").write_text('{"abs_rel": 0.1}')
-    assert main(["export-gt", "--data-path", str(syn), "--split-file", str(syn / "splits/synth/test_files.txt"),
-                 "--out", str(inp / "gt.npz")]) == 0
+    assert (
+        main(
+            [
+                "export-gt",
+                "--data-path",
+                str(syn),
+                "--split-file",
+                str(syn / "splits/synth/test_files.txt"),
+                "--out",
+                str(inp / "gt.npz"),
+            ]
+        )
+        == 0
+    )
     # training data with damaged frames (copies of the synthetic set)
     zero = inp / "zero_syn"
     shutil.copytree(syn, zero)
@@ -97,42 +110,76 @@ def world(make_synth, tmp_path_factory) -> dict[str, Path]:
 CASES = [
     # synth
     ("synth-out-under-file", "synth --out {in}/blocker/data", ["--out", "blocker is a file"]),
-    ("synth-out-foreign-folder", "synth --out {in}/userdir --drives 2 --frames 5 --width 32 --height 16",
-     ["userdir", "posecons did not write"]),
+    (
+        "synth-out-foreign-folder",
+        "synth --out {in}/userdir --drives 2 --frames 5 --width 32 --height 16",
+        ["userdir", "posecons did not write"],
+    ),
     ("synth-drives-0", "synth --out {out} --drives 0", ["--drives", "≥ 1"]),
     ("synth-one-drive", "synth --out {out} --drives 1 --frames 5 --width 32 --height 16", ["at least 2 drives"]),
     ("synth-frames-word", "synth --out {out} --frames many", ["--frames", "expected an integer"]),
     ("synth-width-0", "synth --out {out} --width 0", ["--width", "≥ 1"]),
     # export-gt
-    ("export-gt-split-two-fields", "export-gt --data-path {in}/nan_raw --split-file {in}/two_fields.txt --out {out}",
-     ["two_fields.txt:1", "fields"]),
-    ("export-gt-nan-in-calibration",
-     "export-gt --data-path {in}/nan_raw --split-file {syn}/splits/synth/test_files.txt --out {out}",
-     ["calib_cam_to_cam.txt", "P_rect_02", "NaN"]),
-    ("export-gt-missing-split", "export-gt --data-path {syn} --split-file {in}/nope.txt --out {out}",
-     ["nope.txt: split file not found"]),
-    ("export-gt-out-is-folder",
-     "export-gt --data-path {syn} --split-file {syn}/splits/synth/test_files.txt --out {in}/userdir",
-     ["--out", "userdir", "is a folder"]),
+    (
+        "export-gt-split-two-fields",
+        "export-gt --data-path {in}/nan_raw --split-file {in}/two_fields.txt --out {out}",
+        ["two_fields.txt:1", "fields"],
+    ),
+    (
+        "export-gt-nan-in-calibration",
+        "export-gt --data-path {in}/nan_raw --split-file {syn}/splits/synth/test_files.txt --out {out}",
+        ["calib_cam_to_cam.txt", "P_rect_02", "NaN"],
+    ),
+    (
+        "export-gt-missing-split",
+        "export-gt --data-path {syn} --split-file {in}/nope.txt --out {out}",
+        ["nope.txt: split file not found"],
+    ),
+    (
+        "export-gt-out-is-folder",
+        "export-gt --data-path {syn} --split-file {syn}/splits/synth/test_files.txt --out {in}/userdir",
+        ["--out", "userdir", "is a folder"],
+    ),
     # prepare
-    ("prepare-missing-input", "prepare --input {in}/nope.mp4 --out {out} --fx 1 --fy 1 --cx 1 --cy 1",
-     ["nope.mp4: input not found"]),
-    ("prepare-garbage-video", "prepare --input {in}/garbage.mp4 --out {out} --fx 1 --fy 1 --cx 1 --cy 1",
-     ["garbage.mp4", "video"]),
+    (
+        "prepare-missing-input",
+        "prepare --input {in}/nope.mp4 --out {out} --fx 1 --fy 1 --cx 1 --cy 1",
+        ["nope.mp4: input not found"],
+    ),
+    (
+        "prepare-garbage-video",
+        "prepare --input {in}/garbage.mp4 --out {out} --fx 1 --fy 1 --cx 1 --cy 1",
+        ["garbage.mp4", "video"],
+    ),
     ("prepare-no-intrinsics", "prepare --input {in}/frames --out {out}", ["intrinsics needed"]),
     ("prepare-fx-nan", "prepare --input {in}/frames --out {out} --fx nan --fy 1 --cx 1 --cy 1", ["--fx", "> 0"]),
-    ("prepare-calib-nan", "prepare --input {in}/frames --out {out} --calib {in}/nan_calib.txt",
-     ["nan_calib.txt:1", "NaN"]),
-    ("prepare-both-intrinsics", "prepare --input {in}/frames --out {out} --calib {in}/nan_calib.txt --fx 1 --fy 1 "
-     "--cx 1 --cy 1", ["not both"]),
-    ("prepare-out-under-file", "prepare --input {in}/frames --out {in}/blocker/x --fx 1 --fy 1 --cx 1 --cy 1",
-     ["--out", "blocker is a file"]),
+    (
+        "prepare-calib-nan",
+        "prepare --input {in}/frames --out {out} --calib {in}/nan_calib.txt",
+        ["nan_calib.txt:1", "NaN"],
+    ),
+    (
+        "prepare-both-intrinsics",
+        "prepare --input {in}/frames --out {out} --calib {in}/nan_calib.txt --fx 1 --fy 1 --cx 1 --cy 1",
+        ["not both"],
+    ),
+    (
+        "prepare-out-under-file",
+        "prepare --input {in}/frames --out {in}/blocker/x --fx 1 --fy 1 --cx 1 --cy 1",
+        ["--out", "blocker is a file"],
+    ),
     # build-split
-    ("build-split-val-fraction", "build-split --data-path {syn} --out {out} --val-fraction 2",
-     ["--val-fraction", "[0, 1]"]),
+    (
+        "build-split-val-fraction",
+        "build-split --data-path {syn} --out {out} --val-fraction 2",
+        ["--val-fraction", "[0, 1]"],
+    ),
     ("build-split-no-frames", "build-split --data-path {in}/userdir --out {out}", ["userdir", "no usable frames"]),
-    ("build-split-bad-static", "build-split --data-path {syn} --out {out} --static-frames {in}/static.txt",
-     ["static.txt:1"]),
+    (
+        "build-split-bad-static",
+        "build-split --data-path {syn} --out {out} --static-frames {in}/static.txt",
+        ["static.txt:1"],
+    ),
     # train
     ("train-batch-negative", TRAIN + " --set train.batch_size=-2", ["train.batch_size must be ≥ 1, got -2"]),
     ("train-batch-zero", TRAIN + " --set train.batch_size=0", ["train.batch_size must be ≥ 1, got 0"]),
@@ -144,10 +191,16 @@ CASES = [
     ("train-missing-data", TRAIN.replace("--data-path {syn}", "--data-path {in}/nope"), ["nope", "not a directory"]),
     ("train-resume-without-run", TRAIN + " --resume", ["last.pt does not exist"]),
     ("train-batch-too-large", TRAIN + " --set train.batch_size=64", ["fewer than one batch", "train.batch_size"]),
-    ("train-bundled-split-wrong-data", TRAIN + " --set data.split=eigen_zhou",
-     ["eigen_zhou/train_files.txt:1", "missing"]),
-    ("train-zero-byte-image-in-worker",
-     TRAIN.replace("{syn}", "{in}/zero_syn") + " --set data.num_workers=1", ["unreadable image", ".png"]),
+    (
+        "train-bundled-split-wrong-data",
+        TRAIN + " --set data.split=eigen_zhou",
+        ["eigen_zhou/train_files.txt:1", "missing"],
+    ),
+    (
+        "train-zero-byte-image-in-worker",
+        TRAIN.replace("{syn}", "{in}/zero_syn") + " --set data.num_workers=1",
+        ["unreadable image", ".png"],
+    ),
     ("train-frame-of-other-size", TRAIN.replace("{syn}", "{in}/odd_syn"), ["100×32 pixels", "same drive"]),
     ("train-devices-0", TRAIN + " --devices 0", ["--devices", "≥ 1"]),
     ("train-max-steps-negative", TRAIN + " --max-steps -1", ["--max-steps", "≥ 0"]),
@@ -156,67 +209,146 @@ CASES = [
     ("demo-out-under-file", "demo --out {in}/blocker/demo", ["--out", "blocker is a file"]),
     ("demo-seed-negative", "demo --out {out} --seed -1", ["--seed", "≥ 0"]),
     # evaluate-depth
-    ("evaluate-depth-batch-0", "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --batch-size 0",
-     ["--batch-size", "≥ 1"]),
-    ("evaluate-depth-json-under-file", "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz "
-     "--json {in}/blocker/d.json", ["--json", "blocker is a file"]),
+    (
+        "evaluate-depth-batch-0",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --batch-size 0",
+        ["--batch-size", "≥ 1"],
+    ),
+    (
+        "evaluate-depth-json-under-file",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --json {in}/blocker/d.json",
+        ["--json", "blocker is a file"],
+    ),
     ("evaluate-depth-no-gt", "evaluate-depth --pred-disps {in}/random.npy", ["--pred-disps needs --gt"]),
-    ("evaluate-depth-random-npy", "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz",
-     ["random.npy", "not a .npy array of numbers"]),
-    ("evaluate-depth-gt-not-npz", "evaluate-depth --pred-disps {in}/random.npy --gt {in}/result.json",
-     ["result.json", "ground-truth"]),
-    ("evaluate-depth-random-checkpoint", "evaluate-depth --checkpoint {in}/random.pt --data-path {syn} "
-     "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz", ["random.pt", "not a readable checkpoint"]),
-    ("evaluate-depth-empty-checkpoint", "evaluate-depth --checkpoint {in}/empty.pt --data-path {syn} "
-     "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz", ["empty.pt", "not a readable checkpoint"]),
-    ("evaluate-depth-device-foo", "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
-     "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz --device foo", ["--device", "'foo'"]),
-    ("evaluate-depth-checkpoint-needs-data", "evaluate-depth --checkpoint {in}/model.pt --gt {in}/gt.npz",
-     ["--checkpoint needs --data-path"]),
+    (
+        "evaluate-depth-random-npy",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz",
+        ["random.npy", "not a .npy array of numbers"],
+    ),
+    (
+        "evaluate-depth-gt-not-npz",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/result.json",
+        ["result.json", "ground-truth"],
+    ),
+    (
+        "evaluate-depth-random-checkpoint",
+        "evaluate-depth --checkpoint {in}/random.pt --data-path {syn} "
+        "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz",
+        ["random.pt", "not a readable checkpoint"],
+    ),
+    (
+        "evaluate-depth-empty-checkpoint",
+        "evaluate-depth --checkpoint {in}/empty.pt --data-path {syn} "
+        "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz",
+        ["empty.pt", "not a readable checkpoint"],
+    ),
+    (
+        "evaluate-depth-device-foo",
+        "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
+        "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz --device foo",
+        ["--device", "'foo'"],
+    ),
+    (
+        "evaluate-depth-checkpoint-needs-data",
+        "evaluate-depth --checkpoint {in}/model.pt --gt {in}/gt.npz",
+        ["--checkpoint needs --data-path"],
+    ),
     # evaluate-pose
-    ("evaluate-pose-sequence-word", "evaluate-pose --checkpoint {in}/model.pt --gt-poses {in}/two_poses.txt "
-     "--data-path {syn}/odometry --sequence abc", ["--sequence", "expected an integer", "'abc'"]),
-    ("evaluate-pose-nan-poses", "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {in}/nan_poses.txt",
-     ["nan_poses.txt:1", "NaN"]),
-    ("evaluate-pose-count-mismatch",
-     "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {syn}/odometry/poses/01.txt", ["two_poses.txt has 2"]),
-    ("evaluate-pose-times-mismatch", "evaluate-pose --pred-poses {syn}/odometry/poses/01.txt "
-     "--gt-poses {syn}/odometry/poses/01.txt --times {in}/two_times.txt", ["two_times.txt has 2 timestamps"]),
-    ("evaluate-pose-out-dir-is-file", "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {in}/two_poses.txt "
-     "--out-dir {in}/blocker", ["--out-dir", "blocker: exists and is not a folder"]),
+    (
+        "evaluate-pose-sequence-word",
+        "evaluate-pose --checkpoint {in}/model.pt --gt-poses {in}/two_poses.txt "
+        "--data-path {syn}/odometry --sequence abc",
+        ["--sequence", "expected an integer", "'abc'"],
+    ),
+    (
+        "evaluate-pose-nan-poses",
+        "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {in}/nan_poses.txt",
+        ["nan_poses.txt:1", "NaN"],
+    ),
+    (
+        "evaluate-pose-count-mismatch",
+        "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {syn}/odometry/poses/01.txt",
+        ["two_poses.txt has 2"],
+    ),
+    (
+        "evaluate-pose-times-mismatch",
+        "evaluate-pose --pred-poses {syn}/odometry/poses/01.txt "
+        "--gt-poses {syn}/odometry/poses/01.txt --times {in}/two_times.txt",
+        ["two_times.txt has 2 timestamps"],
+    ),
+    (
+        "evaluate-pose-out-dir-is-file",
+        "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {in}/two_poses.txt --out-dir {in}/blocker",
+        ["--out-dir", "blocker: exists and is not a folder"],
+    ),
     # compare
     ("compare-missing", "compare {in}/nope.json", ["nope.json: no such evaluation JSON"]),
     ("compare-not-depth", "compare {in}/result.json", ["result.json: not a depth evaluation"]),
     ("compare-out-under-file", "compare {in}/result.json --out {in}/blocker/t.md", ["--out", "blocker is a file"]),
     # predict
-    ("predict-out-foreign-folder", "predict --checkpoint {in}/model.pt --input {in}/frames --out {in}/userdir "
-     "--quiet", ["userdir", "posecons did not write"]),
-    ("predict-out-under-file", "predict --checkpoint {in}/model.pt --input {in}/frames --out {in}/blocker/p",
-     ["--out", "blocker is a file"]),
-    ("predict-batch-0", "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --batch-size 0",
-     ["--batch-size", "≥ 1"]),
-    ("predict-zero-byte-image", "predict --checkpoint {in}/model.pt --input {in}/empty.png --out {out} --quiet",
-     ["empty.png", "unreadable image"]),
-    ("predict-garbage-video", "predict --checkpoint {in}/model.pt --input {in}/garbage.mp4 --out {out} --quiet",
-     ["garbage.mp4", "video"]),
-    ("predict-random-checkpoint", "predict --checkpoint {in}/random.pt --input {in}/frames --out {out} --quiet",
-     ["random.pt", "not a readable checkpoint"]),
-    ("predict-intrinsics-nan", "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --quiet "
-     "--intrinsics nan,1,2,3", ["--intrinsics", "NaN"]),
-    ("predict-device-foo", "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --device foo",
-     ["--device", "'foo'"]),
-    ("predict-scale-0", "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --scale 0",
-     ["--scale", "> 0"]),
+    (
+        "predict-out-foreign-folder",
+        "predict --checkpoint {in}/model.pt --input {in}/frames --out {in}/userdir --quiet",
+        ["userdir", "posecons did not write"],
+    ),
+    (
+        "predict-out-under-file",
+        "predict --checkpoint {in}/model.pt --input {in}/frames --out {in}/blocker/p",
+        ["--out", "blocker is a file"],
+    ),
+    (
+        "predict-batch-0",
+        "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --batch-size 0",
+        ["--batch-size", "≥ 1"],
+    ),
+    (
+        "predict-zero-byte-image",
+        "predict --checkpoint {in}/model.pt --input {in}/empty.png --out {out} --quiet",
+        ["empty.png", "unreadable image"],
+    ),
+    (
+        "predict-garbage-video",
+        "predict --checkpoint {in}/model.pt --input {in}/garbage.mp4 --out {out} --quiet",
+        ["garbage.mp4", "video"],
+    ),
+    (
+        "predict-random-checkpoint",
+        "predict --checkpoint {in}/random.pt --input {in}/frames --out {out} --quiet",
+        ["random.pt", "not a readable checkpoint"],
+    ),
+    (
+        "predict-intrinsics-nan",
+        "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --quiet --intrinsics nan,1,2,3",
+        ["--intrinsics", "NaN"],
+    ),
+    (
+        "predict-device-foo",
+        "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --device foo",
+        ["--device", "'foo'"],
+    ),
+    (
+        "predict-scale-0",
+        "predict --checkpoint {in}/model.pt --input {in}/frames --out {out} --scale 0",
+        ["--scale", "> 0"],
+    ),
     # export
     ("export-random-checkpoint", "export --checkpoint {in}/random.pt --out {out}", ["random.pt", "not a readable"]),
     ("export-out-under-file", "export --checkpoint {in}/model.pt --out {in}/blocker/e", ["--out", "blocker is a file"]),
-    ("export-tolerance-negative", "export --checkpoint {in}/model.pt --out {out} --tolerance -1",
-     ["--tolerance", "≥ 0"]),
+    (
+        "export-tolerance-negative",
+        "export --checkpoint {in}/model.pt --out {out} --tolerance -1",
+        ["--tolerance", "≥ 0"],
+    ),
 ]
 if not torch.cuda.is_available():
-    CASES.append(("evaluate-depth-device-cuda", "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
-                  "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz --device cuda",
-                  ["--device cuda", "CUDA is not available"]))
+    CASES.append(
+        (
+            "evaluate-depth-device-cuda",
+            "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
+            "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz --device cuda",
+            ["--device cuda", "CUDA is not available"],
+        )
+    )
 
 
 @pytest.mark.parametrize("command,fragments", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
@@ -248,8 +380,16 @@ def test_the_catalogue_covers_every_command():
 def test_predict_again_into_its_output_keeps_the_users_files(world, tmp_path):
     """A second predict into the same folder replaces its own outputs only (the bug: rmtree of OUT/depth)."""
     out = tmp_path / "pred"
-    args = ["predict", "--checkpoint", str(world["in"] / "model.pt"), "--input", str(world["in"] / "frames"),
-            "--out", str(out), "--quiet"]
+    args = [
+        "predict",
+        "--checkpoint",
+        str(world["in"] / "model.pt"),
+        "--input",
+        str(world["in"] / "frames"),
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(args) == 0
     (out / "depth" / "notes.txt").write_text("the user's")
     (out / "mine.txt").write_text("also the user's")

@@ -10,8 +10,9 @@ from posecons.model import PoseConsModel
 
 
 def small_model(layers=10):
-    cfg = load_config(overrides=["model.height=64", "model.width=96", "model.pretrained=false",
-                                 f"model.num_layers={layers}"])
+    cfg = load_config(
+        overrides=["model.height=64", "model.width=96", "model.pretrained=false", f"model.num_layers={layers}"]
+    )
     return PoseConsModel(cfg), cfg
 
 

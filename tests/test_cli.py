@@ -42,5 +42,7 @@ def test_every_option_with_a_default_shows_it():
         for action in parser._actions:
             if action.default is None or action.default is False or action.default in ([], argparse.SUPPRESS):
                 continue
-            assert "default" in (action.help or "") or f"(default: {action.default})" in " ".join(text.split()), \
-                (name, action.dest)
+            assert "default" in (action.help or "") or f"(default: {action.default})" in " ".join(text.split()), (
+                name,
+                action.dest,
+            )

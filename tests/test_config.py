@@ -24,30 +24,33 @@ def test_preset_with_base_and_overrides(tmp_path):
     assert c.train.lr == 1e-3 and c.loss.fb_weight == 1.0 and isinstance(c.loss.fb_weight, float)
 
 
-@pytest.mark.parametrize("override,message", [
-    ("model.heigth=96", "unknown config key 'model.heigth'"),
-    ("train.batch_size=big", "train.batch_size: expected int"),
-    ("model.height=100", "multiples of 32"),
-    ("model.height=32", "at least 64, got 32×640"),  # the networks' padding would fail on 1-pixel features
-    ("loss.constraints=[cycle]", "unknown \\['cycle'\\]"),
-    ("train.keep_epochs=-2", "train.keep_epochs must be -1"),
-    ("model.frame_ids=[0,1]", None),  # valid without fb/cyc
-    ("train.batch_size=0", "train.batch_size must be ≥ 1, got 0"),
-    ("train.batch_size=-2", "train.batch_size must be ≥ 1, got -2"),
-    ("train.lr=nan", "train.lr must be a finite number, got nan"),
-    ("train.lr=0", "train.lr must be > 0"),
-    ("loss.fb_weight=-.inf", "loss.fb_weight must be a finite number"),
-    ("data.num_workers=-1", "data.num_workers must be ≥ 0"),
-    ("data.flip_prob=1.5", r"data.flip_prob must be in \[0, 1\]"),
-    ("loss.identity_fraction=-0.1", r"loss.identity_fraction must be in \[0, 1\]"),
-    ("train.epochs=0", "train.epochs must be ≥ 1"),
-    ("train.grad_accum=0", "train.grad_accum must be ≥ 1"),
-    ("train.lr_decay_epochs=[0]", "train.lr_decay_epochs must be epochs ≥ 1"),
-    ("model.scales=[0,4]", "model.scales must be distinct scales from 0–3"),
-    ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
-    ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
-    ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
-])
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("model.heigth=96", "unknown config key 'model.heigth'"),
+        ("train.batch_size=big", "train.batch_size: expected int"),
+        ("model.height=100", "multiples of 32"),
+        ("model.height=32", "at least 64, got 32×640"),  # the networks' padding would fail on 1-pixel features
+        ("loss.constraints=[cycle]", "unknown \\['cycle'\\]"),
+        ("train.keep_epochs=-2", "train.keep_epochs must be -1"),
+        ("model.frame_ids=[0,1]", None),  # valid without fb/cyc
+        ("train.batch_size=0", "train.batch_size must be ≥ 1, got 0"),
+        ("train.batch_size=-2", "train.batch_size must be ≥ 1, got -2"),
+        ("train.lr=nan", "train.lr must be a finite number, got nan"),
+        ("train.lr=0", "train.lr must be > 0"),
+        ("loss.fb_weight=-.inf", "loss.fb_weight must be a finite number"),
+        ("data.num_workers=-1", "data.num_workers must be ≥ 0"),
+        ("data.flip_prob=1.5", r"data.flip_prob must be in \[0, 1\]"),
+        ("loss.identity_fraction=-0.1", r"loss.identity_fraction must be in \[0, 1\]"),
+        ("train.epochs=0", "train.epochs must be ≥ 1"),
+        ("train.grad_accum=0", "train.grad_accum must be ≥ 1"),
+        ("train.lr_decay_epochs=[0]", "train.lr_decay_epochs must be epochs ≥ 1"),
+        ("model.scales=[0,4]", "model.scales must be distinct scales from 0–3"),
+        ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
+        ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
+        ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
+    ],
+)
 def test_bad_values_are_rejected(override, message):
     if message is None:
         assert load_config(overrides=[override]).model.frame_ids == [0, 1]
@@ -58,8 +61,9 @@ def test_bad_values_are_rejected(override, message):
         load_config(overrides=[override])
 
 
-@pytest.mark.parametrize("value,meaning", [("epoch", "epoch"), ("off", "off"), ("false", "off"), ("0", "epoch"),
-                                           ("250", 250)])
+@pytest.mark.parametrize(
+    "value,meaning", [("epoch", "epoch"), ("off", "off"), ("false", "off"), ("0", "epoch"), ("250", 250)]
+)
 def test_val_every_spellings(value, meaning):
     """'epoch' and 'off' (YAML's bare off reads as false); 0 is the old spelling of 'epoch'."""
     assert load_config(overrides=[f"train.val_every={value}"]).train.val_every == meaning

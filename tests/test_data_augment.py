@@ -21,7 +21,9 @@ def test_jitter_is_per_sample_and_shared_by_its_frames() -> None:
     out = color_jitter(frames, params)
     assert out.shape == frames.shape and torch.equal(out[1], frames[1])
     for f in range(3):  # each frame of sample 0 gets b, c, s, h in that order
-        x = TF.adjust_hue(TF.adjust_saturation(TF.adjust_contrast(TF.adjust_brightness(frames[0, f], 1.1), 0.9), 1.2), 0.05)
+        x = TF.adjust_hue(
+            TF.adjust_saturation(TF.adjust_contrast(TF.adjust_brightness(frames[0, f], 1.1), 0.9), 1.2), 0.05
+        )
         torch.testing.assert_close(out[0, f], x)
 
 

@@ -30,8 +30,9 @@ def test_numpy_and_torch_scaling_agree():
 
 def test_pixel_k_from_a_plain_k_a_raw_or_an_odometry_calibration_file(tmp_path):
     (tmp_path / "k.txt").write_text("K: 721.5 0 609.6 0 721.5 172.9 0 0 1\n")
-    (tmp_path / "odom.txt").write_text("P0: 1 0 0 0 0 1 0 0 0 0 1 0\n"
-                                       "P2: 721.5 0 609.6 44.9 0 721.5 172.9 0.2 0 0 1 0\n")
+    (tmp_path / "odom.txt").write_text(
+        "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nP2: 721.5 0 609.6 44.9 0 721.5 172.9 0.2 0 0 1 0\n"
+    )
     for name in ("k.txt", "odom.txt"):
         assert np.allclose(read_calib_intrinsics(tmp_path / name), K_PIXEL)
     (tmp_path / "none.txt").write_text("P0: 1 0 0 0 0 1 0 0 0 0 1 0\n")

@@ -99,12 +99,16 @@ def test_unreadable_video_leaves_no_output(tmp_path: Path) -> None:
 
 def test_synth_refuses_non_empty_output(tmp_path: Path) -> None:
     (tmp_path / "keep.txt").write_text("x")
-    assert main(["synth", "--out", str(tmp_path), "--drives", "2", "--frames", "3", "--width", "32", "--height", "16"]) == 2
+    assert (
+        main(["synth", "--out", str(tmp_path), "--drives", "2", "--frames", "3", "--width", "32", "--height", "16"])
+        == 2
+    )
     assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
 
 
-def test_skip_incomplete_drops_lines_without_neighbours_and_says_how_many(tmp_path: Path, kitti_dir: Path,
-                                                                          capsys) -> None:
+def test_skip_incomplete_drops_lines_without_neighbours_and_says_how_many(
+    tmp_path: Path, kitti_dir: Path, capsys
+) -> None:
     root = _mini_raw(tmp_path / "raw", kitti_dir, frames=3)
     split = tmp_path / "train.txt"
     split.write_text(f"{DRIVE} 1 l\n{DRIVE} 2 l\n")

@@ -51,11 +51,18 @@ def test_real_calibration(kitti_dir: Path) -> None:
     calib = read_calib_file(kitti_dir / "calib" / "2011_09_26" / "calib_cam_to_cam.txt")
     assert calib["calib_time"] == "09-Jan-2012 13:57:47"
     p2 = calib["P_rect_02"].reshape(3, 4)
-    assert p2[0, 0] == pytest.approx(721.5377) and p2[0, 2] == pytest.approx(609.5593) and p2[1, 2] == pytest.approx(172.854)
+    assert (
+        p2[0, 0] == pytest.approx(721.5377)
+        and p2[0, 2] == pytest.approx(609.5593)
+        and p2[1, 2] == pytest.approx(172.854)
+    )
     k = raw_intrinsics(kitti_dir / "calib" / "2011_09_26")
     assert k[0, 0] == pytest.approx(721.5377 / 1242) and k[1, 1] == pytest.approx(721.5377 / 375)
     assert k[0, 2] == pytest.approx(609.5593 / 1242, rel=1e-6) and k[2, 2] == 1
-    assert read_calib_file(kitti_dir / "calib" / "2011_09_26" / "calib_velo_to_cam.txt")["calib_time"] == "15-Mar-2012 11:37:16"
+    assert (
+        read_calib_file(kitti_dir / "calib" / "2011_09_26" / "calib_velo_to_cam.txt")["calib_time"]
+        == "15-Mar-2012 11:37:16"
+    )
 
 
 def test_real_odometry_poses(kitti_dir: Path) -> None:

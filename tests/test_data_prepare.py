@@ -33,13 +33,37 @@ def test_prepare_video_is_readable(tmp_path: Path) -> None:
     video = tmp_path / "clip.mp4"
     _write_video(video)
     out = tmp_path / "custom"
-    assert main(["prepare", "--input", str(video), "--out", str(out), "--fx", "100", "--fy", "100",
-                 "--cx", "64", "--cy", "48", "--width", "64", "--height", "48"]) == 0
+    assert (
+        main(
+            [
+                "prepare",
+                "--input",
+                str(video),
+                "--out",
+                str(out),
+                "--fx",
+                "100",
+                "--fy",
+                "100",
+                "--cx",
+                "64",
+                "--cy",
+                "48",
+                "--width",
+                "64",
+                "--height",
+                "48",
+            ]
+        )
+        == 0
+    )
     frames = sorted((out / "custom" / "custom_drive_0000_sync" / "image_02" / "data").glob("*.png"))
     assert 11 <= len(frames) <= 13  # the still tail is dropped
     k = raw_intrinsics(out / "custom")
     np.testing.assert_allclose(k, [[100 / 128, 0, 0.5], [0, 100 / 96, 0.5], [0, 0, 1]], rtol=1e-6)
-    lines = read_split(out / "splits" / "custom" / "train_files.txt") + read_split(out / "splits" / "custom" / "val_files.txt")
+    lines = read_split(out / "splits" / "custom" / "train_files.txt") + read_split(
+        out / "splits" / "custom" / "val_files.txt"
+    )
     assert len(lines) == len(frames) - 2
     ds = KittiRawDataset(out, out / "splits" / "custom" / "train_files.txt", 32, 64, train=False)
     sample = ds[0]

@@ -36,13 +36,20 @@ def test_layout_and_description(synth: Path) -> None:
     assert info["test_drives"] == [drive_folder(1)] and info["train_drives"] == [drive_folder(0)]
     assert info["stereo_baseline_m"] == pytest.approx(0.533, abs=0.01)
     drive = synth / drive_folder(1)
-    for sub, pattern in (("image_02/data", "*.png"), ("image_03/data", "*.png"), ("velodyne_points/data", "*.bin"), ("oxts/data", "*.txt")):
+    for sub, pattern in (
+        ("image_02/data", "*.png"),
+        ("image_03/data", "*.png"),
+        ("velodyne_points/data", "*.bin"),
+        ("oxts/data", "*.txt"),
+    ):
         assert len(list((drive / sub).glob(pattern))) == FRAMES
     assert len(list_sequence_frames(synth / "odometry", 1)) == FRAMES
     assert len(read_split(synth / "splits" / "synth_odom" / "test_files_01.txt")) == FRAMES - 1
     test_lines = (synth / "splits" / "synth" / "test_files.txt").read_text().splitlines()
     assert test_lines[0] == f"{drive_folder(1)} 0000000000 l" and len(test_lines) == FRAMES
-    train = read_split(synth / "splits" / "synth" / "train_files.txt") + read_split(synth / "splits" / "synth" / "val_files.txt")
+    train = read_split(synth / "splits" / "synth" / "train_files.txt") + read_split(
+        synth / "splits" / "synth" / "val_files.txt"
+    )
     assert {line.folder for line in train} == {drive_folder(0)} and all(1 <= line.frame <= FRAMES - 2 for line in train)
     scan = load_velodyne(drive / "velodyne_points" / "data" / "0000000000.bin")
     assert scan.shape[1] == 4 and len(scan) > 10000 and np.linalg.norm(scan[:, :3], axis=1).max() <= 120.0 + 1e-3
@@ -50,14 +57,31 @@ def test_layout_and_description(synth: Path) -> None:
 
 def test_intrinsics_scale_with_size(synth: Path) -> None:
     k = raw_intrinsics(synth / "2020_01_01")
-    np.testing.assert_allclose(k[:2], np.array([[721.5377 / 1242, 0, 609.5593 / 1242], [0, 721.5377 / 375, 172.854 / 375]]), rtol=1e-5)
+    np.testing.assert_allclose(
+        k[:2], np.array([[721.5377 / 1242, 0, 609.5593 / 1242], [0, 721.5377 / 375, 172.854 / 375]]), rtol=1e-5
+    )
 
 
 def test_lidar_gt_matches_renderer_depth(synth: Path, tmp_path: Path) -> None:
     """camera_z ground truth equals the renderer's exact depth along each winning point's ray."""
     gt_file = tmp_path / "gt.npz"
     split = synth / "splits" / "synth" / "test_files.txt"
-    assert main(["export-gt", "--data-path", str(synth), "--split-file", str(split), "--out", str(gt_file), "--depth", "camera_z"]) == 0
+    assert (
+        main(
+            [
+                "export-gt",
+                "--data-path",
+                str(synth),
+                "--split-file",
+                str(split),
+                "--out",
+                str(gt_file),
+                "--depth",
+                "camera_z",
+            ]
+        )
+        == 0
+    )
     maps, lines = load_gt(gt_file)
     assert len(maps) == FRAMES and lines[3] == f"{drive_folder(1)} 3 l" and maps[0].shape == (H, W)
     drive, rig = make_drive(SEED, 1, FRAMES), Rig(W, H)
@@ -97,8 +121,9 @@ def test_oxts_and_odometry_poses_reproduce_trajectory(synth: Path) -> None:
     speed = np.hypot(packets[:, 6], packets[:, 7]) / 10  # m/s at 10 Hz → m per frame
     assert 0.4 < speed.mean() < 1.6
     cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])
-    np.testing.assert_allclose(read_kitti_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0,
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        read_kitti_poses(synth / "odometry" / "poses" / "00.txt"), np.linalg.inv(cam0[0]) @ cam0, atol=1e-6
+    )
 
 
 def _relative_world(poses: np.ndarray) -> np.ndarray:
@@ -113,13 +138,16 @@ def test_raw_dataset_sizes_flip_and_determinism(synth: Path) -> None:
     plain = KittiRawDataset(synth, split, H // 2, W // 2, train=False)
     sample = plain[0]
     assert sample["frames"].shape == (3, 3, H // 2, W // 2) and sample["frames"].dtype == torch.float32
-    np.testing.assert_allclose(sample["intrinsics"].numpy(), raw_intrinsics(synth / "2020_01_01", 2 if sample["side"] == "l" else 3))
+    np.testing.assert_allclose(
+        sample["intrinsics"].numpy(), raw_intrinsics(synth / "2020_01_01", 2 if sample["side"] == "l" else 3)
+    )
     assert sample["color_aug"].tolist() == [1, 1, 1, 0]
     flipped = KittiRawDataset(synth, split, H // 2, W // 2, flip_prob=1.0, jitter_prob=0.0)[0]
     assert torch.equal(flipped["frames"], sample["frames"].flip(-1))
     # integer pixel centres: cx ↦ W − 1 − cx in pixels at the network width
     assert flipped["intrinsics"][0, 2].item() * (W // 2) == pytest.approx(
-        W // 2 - 1 - sample["intrinsics"][0, 2].item() * (W // 2), abs=1e-4)
+        W // 2 - 1 - sample["intrinsics"][0, 2].item() * (W // 2), abs=1e-4
+    )
     assert not torch.equal(sample["frames"][1], sample["frames"][0])  # the neighbour frames differ
     augmented = KittiRawDataset(synth, split, H // 2, W // 2, seed=7, flip_prob=0.5, jitter_prob=1.0)
     draws = [augmented[i]["color_aug"] for i in range(3)]
@@ -141,7 +169,9 @@ def test_odometry_dataset(synth: Path) -> None:
 
 
 def test_build_split_on_synth(synth: Path) -> None:
-    train, val = build_split(synth, test_scenes={drive_folder(1).split("/")[1].removesuffix("_sync")}, val_fraction=0.25)
+    train, val = build_split(
+        synth, test_scenes={drive_folder(1).split("/")[1].removesuffix("_sync")}, val_fraction=0.25
+    )
     assert len(train) + len(val) == 2 * (FRAMES - 2)  # both cameras, frames with both neighbours
     assert {line.folder for line in train + val} == {drive_folder(0)}
 
@@ -149,10 +179,35 @@ def test_build_split_on_synth(synth: Path) -> None:
 @pytest.mark.slow
 def test_synth_is_deterministic(synth: Path, tmp_path: Path) -> None:
     out = tmp_path / "again"
-    assert main(["synth", "--out", str(out), "--drives", "2", "--frames", str(FRAMES), "--seed", str(SEED),
-                 "--width", str(W), "--height", str(H), "--workers", "2"]) == 0
-    for rel in (f"{drive_folder(0)}/image_02/data/0000000005.png", f"{drive_folder(1)}/velodyne_points/data/0000000007.bin",
-                "odometry/poses/01.txt", "splits/synth/train_files.txt", "synth.json"):
+    assert (
+        main(
+            [
+                "synth",
+                "--out",
+                str(out),
+                "--drives",
+                "2",
+                "--frames",
+                str(FRAMES),
+                "--seed",
+                str(SEED),
+                "--width",
+                str(W),
+                "--height",
+                str(H),
+                "--workers",
+                "2",
+            ]
+        )
+        == 0
+    )
+    for rel in (
+        f"{drive_folder(0)}/image_02/data/0000000005.png",
+        f"{drive_folder(1)}/velodyne_points/data/0000000007.bin",
+        "odometry/poses/01.txt",
+        "splits/synth/train_files.txt",
+        "synth.json",
+    ):
         assert (out / rel).read_bytes() == (synth / rel).read_bytes(), rel
 
 
@@ -175,5 +230,5 @@ def test_training_frames_are_decoded_and_resized_as_evaluation_does(tmp_path: Pa
     sample = KittiRawDataset(tmp_path, split, 96, 320, img_ext=".jpg", train=False)[0]
     predictor = Predictor()  # the prediction path only needs the network size here
     predictor.height, predictor.width = 96, 320
-    (_, images, _), = predict_batches(predictor, frames_from_paths([drive / "0000000001.jpg"]), 1, depth=False)
+    ((_, images, _),) = predict_batches(predictor, frames_from_paths([drive / "0000000001.jpg"]), 1, depth=False)
     assert torch.equal(sample["frames"][0], torch.from_numpy(images[0]))

@@ -12,8 +12,11 @@ pytestmark = pytest.mark.slow
 
 def test_demo_writes_report_summary_and_plots(tmp_path):
     out = tmp_path / "demo"
-    summary = run_demo(out, synth={"drives": 2, "frames": 14, "width": 192, "height": 64, "neighbours": 3},
-                       overrides=["train.max_steps=3", "train.val_every=3", "train.batch_size=2", "train.val_samples=4"])
+    summary = run_demo(
+        out,
+        synth={"drives": 2, "frames": 14, "width": 192, "height": 64, "neighbours": 3},
+        overrides=["train.max_steps=3", "train.val_every=3", "train.batch_size=2", "train.val_samples=4"],
+    )
     saved = json.loads((out / "summary.json").read_text())
     for key in ("abs_rel", "abs_rel_untrained", "scale_cv", "ate_mean", "minutes"):
         assert key in saved and saved[key] == summary[key] and saved[key] >= 0
@@ -22,7 +25,12 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
     # The demo preset selects best.pt by ground truth on purpose, and the report says so.
     assert saved["checkpoint"]["selected_by"] == "lowest validation abs_rel (ground truth)"
     assert "best.pt, step 3; selected by: lowest validation abs_rel (ground truth)" in report
-    for plot in ("validation.png", "scale_boxplot.png", "scale_over_time.png", "abs_rel_histogram.png",
-                 "trajectory.png"):
+    for plot in (
+        "validation.png",
+        "scale_boxplot.png",
+        "scale_over_time.png",
+        "abs_rel_histogram.png",
+        "trajectory.png",
+    ):
         assert (out / "plots" / plot).stat().st_size > 1000
         assert f"plots/{plot}" in report

@@ -9,8 +9,24 @@ from posecons.cli import main
 from posecons.data.trajectory_io import read_kitti_poses, read_tum, write_kitti_poses
 
 DRIVE = "2011_09_26/2011_09_26_drive_0002_sync"
-DEPTH_KEYS = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3", "scaling", "scales", "scale_cv",
-              "scale_cv_pooled", "scale_std_over_median", "per_sequence", "n_frames", "n_skipped", "skipped"}
+DEPTH_KEYS = {
+    "abs_rel",
+    "sq_rel",
+    "rmse",
+    "rmse_log",
+    "a1",
+    "a2",
+    "a3",
+    "scaling",
+    "scales",
+    "scale_cv",
+    "scale_cv_pooled",
+    "scale_std_over_median",
+    "per_sequence",
+    "n_frames",
+    "n_skipped",
+    "skipped",
+}
 POSE_KEYS = {"ate_mean", "ate_std", "n_snippets", "ate_full_rmse", "rpe_trans", "rpe_rot", "const_velocity"}
 
 
@@ -32,8 +48,19 @@ def depth_files(tmp_path):
 
 def test_evaluate_depth_from_predictions(depth_files, capsys):
     out = depth_files
-    rc = main(["evaluate-depth", "--pred-disps", str(out / "pred.npy"), "--gt", str(out / "gt.npz"),
-               "--json", str(out / "depth.json"), "--plots", str(out / "plots")])
+    rc = main(
+        [
+            "evaluate-depth",
+            "--pred-disps",
+            str(out / "pred.npy"),
+            "--gt",
+            str(out / "gt.npz"),
+            "--json",
+            str(out / "depth.json"),
+            "--plots",
+            str(out / "plots"),
+        ]
+    )
     assert rc == 0
     result = json.loads((out / "depth.json").read_text())
     assert DEPTH_KEYS <= set(result)
@@ -59,13 +86,37 @@ def test_evaluate_depth_bad_input_names_the_file(depth_files, capsys):
     assert "nan.npy: 1 NaN/inf or non-positive" in capsys.readouterr().err
     # As many lines as the ground truth, but another frame: checked by content, not by count.
     (out / "other.txt").write_text(f"{DRIVE} 1 l\n2011_09_26/2011_09_26_drive_0009_sync 6 l\n{DRIVE} 2 l\n")
-    assert main(["evaluate-depth", "--pred-disps", str(out / "pred.npy"), "--gt", str(out / "gt.npz"),
-                 "--split-file", str(out / "other.txt")]) == 2
+    assert (
+        main(
+            [
+                "evaluate-depth",
+                "--pred-disps",
+                str(out / "pred.npy"),
+                "--gt",
+                str(out / "gt.npz"),
+                "--split-file",
+                str(out / "other.txt"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "other.txt:2: '2011_09_26/2011_09_26_drive_0009_sync 6 l' does not match" in err and "gt.npz" in err
     (out / "same.txt").write_text(f"{DRIVE} 0000000001 l\n2011_09_26/2011_09_26_drive_0009_sync 5 l\n{DRIVE} 2 l\n")
-    assert main(["evaluate-depth", "--pred-disps", str(out / "pred.npy"), "--gt", str(out / "gt.npz"),
-                 "--split-file", str(out / "same.txt")]) == 0  # padding of the frame number does not matter
+    assert (
+        main(
+            [
+                "evaluate-depth",
+                "--pred-disps",
+                str(out / "pred.npy"),
+                "--gt",
+                str(out / "gt.npz"),
+                "--split-file",
+                str(out / "same.txt"),
+            ]
+        )
+        == 0
+    )  # padding of the frame number does not matter
 
 
 @pytest.fixture
@@ -81,8 +132,19 @@ def pose_files(tmp_path, kitti_dir):
 
 def test_evaluate_pose_from_a_trajectory_file(pose_files, kitti_dir):
     out = pose_files
-    rc = main(["evaluate-pose", "--pred-poses", str(out / "pred.txt"), "--gt-poses", str(out / "gt.txt"),
-               "--json", str(out / "pose.json"), "--out-dir", str(out / "traj")])
+    rc = main(
+        [
+            "evaluate-pose",
+            "--pred-poses",
+            str(out / "pred.txt"),
+            "--gt-poses",
+            str(out / "gt.txt"),
+            "--json",
+            str(out / "pose.json"),
+            "--out-dir",
+            str(out / "traj"),
+        ]
+    )
     assert rc == 0
     result = json.loads((out / "pose.json").read_text())
     assert POSE_KEYS <= set(result) and POSE_KEYS - {"const_velocity"} <= set(result["const_velocity"])
@@ -105,8 +167,16 @@ def test_evaluate_pose_bad_input(pose_files, capsys):
 
 
 def test_compare_bolds_the_best(tmp_path, capsys):
-    base = {"scale_cv": 0.08, "abs_rel": 0.115, "sq_rel": 0.9, "rmse": 4.8, "rmse_log": 0.19,
-            "a1": 0.877, "a2": 0.959, "a3": 0.981}
+    base = {
+        "scale_cv": 0.08,
+        "abs_rel": 0.115,
+        "sq_rel": 0.9,
+        "rmse": 4.8,
+        "rmse_log": 0.19,
+        "a1": 0.877,
+        "a2": 0.959,
+        "a3": 0.981,
+    }
     better = dict(base, scale_cv=0.05, abs_rel=0.112, a1=0.880)
     (tmp_path / "base.json").write_text(json.dumps(base))
     (tmp_path / "run" / "eval").mkdir(parents=True)
@@ -116,7 +186,8 @@ def test_compare_bolds_the_best(tmp_path, capsys):
     table = (tmp_path / "t.md").read_text().splitlines()
     assert table[0].startswith("| Method | σ/μ | Abs Rel | Sq Rel | RMSE | RMSE log | δ<1.25")
     assert table[2] == "| base | 0.080 | 0.115 | **0.900** | **4.800** | **0.190** | 0.877 | **0.959** | **0.981** |"
-    assert table[3] == ("| run | **0.050** | **0.112** | **0.900** | **4.800** | **0.190** | **0.880** | **0.959** "
-                        "| **0.981** |")
+    assert table[3] == (
+        "| run | **0.050** | **0.112** | **0.900** | **4.800** | **0.190** | **0.880** | **0.959** | **0.981** |"
+    )
     assert capsys.readouterr().out.splitlines() == table
     assert main(["compare", str(tmp_path / "base.json"), "--names", "a", "b"]) == 2

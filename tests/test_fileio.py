@@ -77,8 +77,11 @@ def test_rerun_replaces_only_its_own_files(tmp_path: Path) -> None:
     with output_dir(out) as tmp:
         (tmp / "depth").mkdir()
         (tmp / "depth" / "0.npy").write_text("new 0")
-    assert _tree(out) == {MANIFEST: (out / MANIFEST).read_bytes(), "depth/0.npy": b"new 0",
-                          "depth/notes.txt": b"the user's"}  # the stale 1.npy of the first run is gone
+    assert _tree(out) == {
+        MANIFEST: (out / MANIFEST).read_bytes(),
+        "depth/0.npy": b"new 0",
+        "depth/notes.txt": b"the user's",
+    }  # the stale 1.npy of the first run is gone
     assert json.loads((out / MANIFEST).read_text()) == ["depth/0.npy"]
 
 

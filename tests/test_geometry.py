@@ -3,9 +3,19 @@ import math
 import pytest
 import torch
 
-from posecons.geometry import (axis_angle_to_matrix, backproject, disp_to_depth, flip_intrinsics, invert_pose, make_pose,
-                               pose_distance, pose_vec_to_mat, project, scale_intrinsics, warp)
-
+from posecons.geometry import (
+    axis_angle_to_matrix,
+    backproject,
+    disp_to_depth,
+    flip_intrinsics,
+    invert_pose,
+    make_pose,
+    pose_distance,
+    pose_vec_to_mat,
+    project,
+    scale_intrinsics,
+    warp,
+)
 
 DTYPES = [torch.float64, torch.float32]
 TOL = {torch.float64: 1e-12, torch.float32: 2e-6}
@@ -31,7 +41,7 @@ def test_batched_transposes_are_per_sample(b, dtype):
     inv = pose_vec_to_mat(aa, t, invert=True)
     assert torch.allclose(inv, invert_pose(pose_vec_to_mat(aa, t)), atol=TOL[dtype])
     for i in range(b):  # each sample against its own single-sample computation
-        single = pose_vec_to_mat(aa[i:i + 1], t[i:i + 1])
+        single = pose_vec_to_mat(aa[i : i + 1], t[i : i + 1])
         R = single[0, :3, :3]
         assert torch.allclose(inv[i, :3, :3], R.T, atol=TOL[dtype])
         assert torch.allclose(inv[i, :3, 3], -R.T @ single[0, :3, 3], atol=5 * TOL[dtype])
@@ -40,8 +50,9 @@ def test_batched_transposes_are_per_sample(b, dtype):
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_rodrigues_matches_known_rotation_and_is_orthonormal(dtype):
     R = axis_angle_to_matrix(torch.tensor([[0.0, 0.0, math.pi / 2]], dtype=dtype))[0]
-    assert torch.allclose(R @ torch.tensor([1.0, 0, 0], dtype=dtype), torch.tensor([0.0, 1, 0], dtype=dtype),
-                          atol=TOL[dtype])
+    assert torch.allclose(
+        R @ torch.tensor([1.0, 0, 0], dtype=dtype), torch.tensor([0.0, 1, 0], dtype=dtype), atol=TOL[dtype]
+    )
     Rs = axis_angle_to_matrix(torch.randn(5, 3, dtype=dtype))
     assert torch.allclose(Rs @ Rs.mT, torch.eye(3, dtype=dtype).expand(5, 3, 3), atol=2 * TOL[dtype])
     assert torch.allclose(torch.linalg.det(Rs), torch.ones(5, dtype=dtype), atol=2 * TOL[dtype])
@@ -111,9 +122,9 @@ def test_disp_to_depth_range():
 def test_scale_intrinsics_per_level():
     K = torch.tensor([[[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]]])
     for s in range(4):
-        Ks = scale_intrinsics(K, 192 // 2 ** s, 640 // 2 ** s)
-        assert Ks[0, 0, 0].item() == pytest.approx(0.58 * 640 / 2 ** s)
-        assert Ks[0, 1, 2].item() == pytest.approx(0.5 * 192 / 2 ** s)
+        Ks = scale_intrinsics(K, 192 // 2**s, 640 // 2**s)
+        assert Ks[0, 0, 0].item() == pytest.approx(0.58 * 640 / 2**s)
+        assert Ks[0, 1, 2].item() == pytest.approx(0.5 * 192 / 2**s)
 
 
 def test_backproject_project_round_trip():
@@ -162,11 +173,15 @@ def test_warping_a_flipped_frame_with_the_flipped_k_is_the_flipped_warp(dtype):
     K_norm = torch.tensor([[[0.7, 0, 0.43], [0, 1.9, 0.55], [0, 0, 1]]], dtype=dtype)  # off-centre cx
     src = torch.rand(1, 3, h, w, dtype=dtype)
     depth = torch.rand(1, 1, h, w, dtype=dtype) * 10 + 5
-    T = pose_vec_to_mat(torch.tensor([[[0.02, -0.05, 0.01]]], dtype=dtype), torch.tensor([[[0.3, 0.1, -0.4]]], dtype=dtype))
+    T = pose_vec_to_mat(
+        torch.tensor([[[0.02, -0.05, 0.01]]], dtype=dtype), torch.tensor([[[0.3, 0.1, -0.4]]], dtype=dtype)
+    )
     S = torch.diag(torch.tensor([-1.0, 1, 1, 1], dtype=dtype))
     warped = warp(src, depth, T, scale_intrinsics(K_norm, h, w))
     flipped = warp(src.flip(-1), depth.flip(-1), S @ T @ S, scale_intrinsics(flip_intrinsics(K_norm, w), h, w))
-    assert torch.allclose(flipped, warped.flip(-1), atol=1e-4 if dtype == torch.float32 else 1e-6)  # project() adds eps to z
+    assert torch.allclose(
+        flipped, warped.flip(-1), atol=1e-4 if dtype == torch.float32 else 1e-6
+    )  # project() adds eps to z
     # cx ↦ 1 − cx, the first-order rule, is a pixel off
     naive = K_norm.clone()
     naive[0, 0, 2] = 1 - naive[0, 0, 2]

@@ -48,8 +48,12 @@ def _drive(synth: Path, index: int) -> Path:
 
 def _frames(synth: Path, index: int) -> np.ndarray:
     """(FRAMES, H, W, 3) uint8 left-camera frames of one synthetic drive."""
-    return np.stack([np.asarray(Image.open(p).convert("RGB"))
-                     for p in sorted((_drive(synth, index) / "image_02" / "data").iterdir())])
+    return np.stack(
+        [
+            np.asarray(Image.open(p).convert("RGB"))
+            for p in sorted((_drive(synth, index) / "image_02" / "data").iterdir())
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +64,10 @@ def ckpt(synth, tmp_path_factory) -> Path:
     model = PoseConsModel(cfg)
     seq = torch.from_numpy(np.stack([resize_rgb(f, 64, 96) for f in _frames(synth, 0)]))
     K = resolve_intrinsics(None, _drive(synth, 0).parent / "calib_cam_to_cam.txt", H, W)
-    batch = {"frames": torch.stack([seq[[1, 0, 2]], seq[[3, 2, 4]]]), "intrinsics": torch.tensor(K).float().expand(2, 3, 3)}
+    batch = {
+        "frames": torch.stack([seq[[1, 0, 2]], seq[[3, 2, 4]]]),
+        "intrinsics": torch.tensor(K).float().expand(2, 3, 3),
+    }
     opt = torch.optim.Adam(model.parameters(), 1e-3)
     for _ in range(2):
         opt.zero_grad()
@@ -93,8 +100,23 @@ def video(synth, tmp_path_factory) -> Path:
 def base_run(ckpt, frames_dir, tmp_path_factory) -> Path:
     """Unscaled prediction over the frame folder, shared by the tests that compare against it."""
     out = tmp_path_factory.mktemp("base")
-    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out),
-                 "--quiet", "--batch-size", "2"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(ckpt),
+                "--input",
+                str(frames_dir),
+                "--out",
+                str(out),
+                "--quiet",
+                "--batch-size",
+                "2",
+            ]
+        )
+        == 0
+    )
     return out
 
 
@@ -103,6 +125,7 @@ def _leftovers(out: Path) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- predict
+
 
 def test_predict_folder_writes_every_frame_at_original_size(base_run):
     names = [f"{i:010d}" for i in range(FRAMES)]
@@ -140,8 +163,23 @@ def test_trajectory_chains_the_pose_net_steps(ckpt, frames_dir, base_run):
 
 def test_predict_video_streams_frames_and_writes_side_by_side(ckpt, video, tmp_path):
     out = tmp_path / "out"
-    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(video), "--out", str(out), "--quiet",
-                 "--batch-size", "4"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(ckpt),
+                "--input",
+                str(video),
+                "--out",
+                str(out),
+                "--quiet",
+                "--batch-size",
+                "4",
+            ]
+        )
+        == 0
+    )
     assert sorted(p.name for p in (out / "depth").iterdir()) == [f"{i:06d}.npy" for i in range(FRAMES)]
     assert np.load(out / "depth" / "000005.npy").shape == (H, W)
     with av.open(str(out / "video.mp4")) as container:
@@ -154,8 +192,25 @@ def test_predict_video_streams_frames_and_writes_side_by_side(ckpt, video, tmp_p
 
 def test_scale_multiplies_depth_and_translations(ckpt, frames_dir, base_run, tmp_path):
     out = tmp_path / "out"
-    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
-                 "--batch-size", "2", "--scale", "2.5"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(ckpt),
+                "--input",
+                str(frames_dir),
+                "--out",
+                str(out),
+                "--quiet",
+                "--batch-size",
+                "2",
+                "--scale",
+                "2.5",
+            ]
+        )
+        == 0
+    )
     for i in range(FRAMES):
         base = np.load(base_run / "depth" / f"{i:010d}.npy")
         np.testing.assert_array_equal(np.load(out / "depth" / f"{i:010d}.npy"), base * np.float32(2.5))
@@ -172,8 +227,27 @@ def test_calibration_from_ground_truth_recovers_a_known_scale(ckpt, frames_dir, 
     gt = {f"{i:06d}": k * np.load(base_run / "depth" / f"{i:010d}.npy") for i in range(FRAMES) if i != 1}
     np.savez(tmp_path / "gt.npz", lines=np.array(["seq 0 l"]), **gt)
     out = tmp_path / "out"
-    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
-                 "--batch-size", "2", "--calibrate-gt", str(tmp_path / "gt.npz"), "--calibrate-frames", "2"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(ckpt),
+                "--input",
+                str(frames_dir),
+                "--out",
+                str(out),
+                "--quiet",
+                "--batch-size",
+                "2",
+                "--calibrate-gt",
+                str(tmp_path / "gt.npz"),
+                "--calibrate-frames",
+                "2",
+            ]
+        )
+        == 0
+    )
     info = json.loads((out / "scale.json").read_text())
     assert info["method"] == "ground_truth" and info["frames_used"] == ["0000000000", "0000000002"]
     assert info["value"] == pytest.approx(k, rel=1e-5)
@@ -194,8 +268,25 @@ def test_calibration_from_16bit_png_folder(ckpt, frames_dir, base_run, tmp_path)
         png[:5] = 0  # invalid rows are ignored
         Image.fromarray(png).save(gt_dir / f"{i:010d}.png")
     out = tmp_path / "out"
-    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
-                 "--calibrate-gt", str(gt_dir), "--calibrate-frames", "1"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(ckpt),
+                "--input",
+                str(frames_dir),
+                "--out",
+                str(out),
+                "--quiet",
+                "--calibrate-gt",
+                str(gt_dir),
+                "--calibrate-frames",
+                "1",
+            ]
+        )
+        == 0
+    )
     info = json.loads((out / "scale.json").read_text())
     assert info["frames_used"] == ["0000000002"] and info["value"] == pytest.approx(k, rel=1e-3)
     assert info["drift"]["frames"] == 3 and info["drift"]["max_rel_deviation"] < 1e-3
@@ -232,8 +323,12 @@ class PlanePredictor(Predictor):
 
 def test_camera_height_calibration_in_predict(frames_dir, tmp_path):
     """Frames of any size: K (normalised KITTI default) is scaled to the original image."""
-    summary = predict(PlanePredictor(), frames_dir, tmp_path / "out",
-                      PredictOptions(camera_height=1.5, calibrate_frames=3, progress=False))
+    summary = predict(
+        PlanePredictor(),
+        frames_dir,
+        tmp_path / "out",
+        PredictOptions(camera_height=1.5, calibrate_frames=3, progress=False),
+    )
     info = json.loads((tmp_path / "out" / "scale.json").read_text())
     assert info["method"] == "camera_height" and len(info["frames_used"]) == 3
     assert info["value"] == pytest.approx(3.0, rel=0.03) and summary["scale"] == info["value"]
@@ -243,14 +338,19 @@ def test_camera_height_calibration_in_predict(frames_dir, tmp_path):
 def test_intrinsics_from_flags_and_calibration_files(tmp_path):
     K = resolve_intrinsics("700,710,320,100", None, 200, 640)
     np.testing.assert_allclose(K, [[700 / 640, 0, 0.5], [0, 710 / 200, 0.5], [0, 0, 1]])
-    (tmp_path / "calib.txt").write_text("P0: 7 0 6 0 0 7 1 0 0 0 1 0\nP2: 718.9 0 607.2 45.4 0 718.9 185.2 -0.1 0 0 1 0\n")
-    np.testing.assert_allclose(read_calib_intrinsics(tmp_path / "calib.txt"),
-                               [[718.9, 0, 607.2], [0, 718.9, 185.2], [0, 0, 1]])
-    np.testing.assert_allclose(resolve_intrinsics(None, None, 10, 10), [[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]],
-                               rtol=1e-6)
+    (tmp_path / "calib.txt").write_text(
+        "P0: 7 0 6 0 0 7 1 0 0 0 1 0\nP2: 718.9 0 607.2 45.4 0 718.9 185.2 -0.1 0 0 1 0\n"
+    )
+    np.testing.assert_allclose(
+        read_calib_intrinsics(tmp_path / "calib.txt"), [[718.9, 0, 607.2], [0, 718.9, 185.2], [0, 0, 1]]
+    )
+    np.testing.assert_allclose(
+        resolve_intrinsics(None, None, 10, 10), [[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], rtol=1e-6
+    )
 
 
 # ----------------------------------------------------------------------------- point clouds
+
 
 @pytest.mark.parametrize("binary", [True, False])
 def test_ply_has_one_vertex_per_valid_pixel(tmp_path, binary):
@@ -264,8 +364,9 @@ def test_ply_has_one_vertex_per_valid_pixel(tmp_path, binary):
     write_ply(tmp_path / "c.ply", points, colors, binary=binary)
     back, back_colors = read_ply(tmp_path / "c.ply")
     assert len(back) == 6 * 9 - 5
-    ref = backproject(torch.from_numpy(np.where(np.isfinite(depth), depth, 0))[None, None].double(),
-                      torch.from_numpy(K)[None])[0].T.numpy()
+    ref = backproject(
+        torch.from_numpy(np.where(np.isfinite(depth), depth, 0))[None, None].double(), torch.from_numpy(K)[None]
+    )[0].T.numpy()
     valid = (np.isfinite(depth) & (depth > 0)).ravel()
     np.testing.assert_allclose(back, ref[valid], rtol=1e-5)
     np.testing.assert_array_equal(back_colors, image.reshape(-1, 3)[valid])
@@ -274,8 +375,27 @@ def test_ply_has_one_vertex_per_valid_pixel(tmp_path, binary):
 def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path):
     out = tmp_path / "out"
     calib = _drive(synth, 1).parent / "calib_cam_to_cam.txt"  # P_rect_02 in pixels of these frames
-    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet",
-                 "--pointcloud", "--every", "2", "--no-trajectory", "--calib", str(calib)]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(ckpt),
+                "--input",
+                str(frames_dir),
+                "--out",
+                str(out),
+                "--quiet",
+                "--pointcloud",
+                "--every",
+                "2",
+                "--no-trajectory",
+                "--calib",
+                str(calib),
+            ]
+        )
+        == 0
+    )
     plys = sorted((out / "pointcloud").iterdir())
     assert [p.stem for p in plys] == ["0000000000", "0000000002", "0000000004"]
     points, colors = read_ply(plys[1])
@@ -283,37 +403,62 @@ def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path):
     depth = np.load(out / "depth" / "0000000002.npy")
     K = read_calib_intrinsics(calib)
     np.testing.assert_allclose(points[:, 2], depth.ravel(), rtol=1e-6)
-    np.testing.assert_allclose(points[:, 0], (np.arange(H * W) % W - K[0, 2]) / K[0, 0] * depth.ravel(), rtol=1e-4,
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        points[:, 0], (np.arange(H * W) % W - K[0, 2]) / K[0, 0] * depth.ravel(), rtol=1e-4, atol=1e-6
+    )
     np.testing.assert_array_equal(colors, _frames(synth, 1)[2].reshape(-1, 3))
 
 
 # ----------------------------------------------------------------------------- export
 
+
 def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, base_run, tmp_path):
     info = export_model(ckpt, tmp_path / "export")
     assert max(info["max_abs_diff"]["depth"].values()) < 1e-4
     assert max(info["max_abs_diff"]["pose"].values()) < 1e-4
-    assert {p.name for p in (tmp_path / "export").iterdir()} == {"depth.onnx", "pose.onnx", "weights.safetensors",
-                                                                  "export.json", MANIFEST}
+    assert {p.name for p in (tmp_path / "export").iterdir()} == {
+        "depth.onnx",
+        "pose.onnx",
+        "weights.safetensors",
+        "export.json",
+        MANIFEST,
+    }
     model, _ = load_model(tmp_path / "export" / "weights.safetensors")
     reference, _ = load_model(ckpt)
     for a, b in zip(model.state_dict().values(), reference.state_dict().values()):
         assert torch.equal(a, b)
     out = tmp_path / "out"
-    assert main(["predict", "--checkpoint", str(tmp_path / "export" / "depth.onnx"), "--input", str(frames_dir),
-                 "--out", str(out), "--quiet", "--batch-size", "3"]) == 0  # another batch size: dynamic axis
+    assert (
+        main(
+            [
+                "predict",
+                "--checkpoint",
+                str(tmp_path / "export" / "depth.onnx"),
+                "--input",
+                str(frames_dir),
+                "--out",
+                str(out),
+                "--quiet",
+                "--batch-size",
+                "3",
+            ]
+        )
+        == 0
+    )  # another batch size: dynamic axis
     for i in range(FRAMES):
-        np.testing.assert_allclose(np.load(out / "depth" / f"{i:010d}.npy"),
-                                   np.load(base_run / "depth" / f"{i:010d}.npy"), rtol=1e-4)
-    np.testing.assert_allclose(read_kitti_poses(out / "trajectory_kitti.txt"),
-                               read_kitti_poses(base_run / "trajectory_kitti.txt"), atol=1e-5)
+        np.testing.assert_allclose(
+            np.load(out / "depth" / f"{i:010d}.npy"), np.load(base_run / "depth" / f"{i:010d}.npy"), rtol=1e-4
+        )
+    np.testing.assert_allclose(
+        read_kitti_poses(out / "trajectory_kitti.txt"), read_kitti_poses(base_run / "trajectory_kitti.txt"), atol=1e-5
+    )
     with pytest.raises(Exception, match="differs from PyTorch"):  # a tolerance nothing meets fails the export
         export_model(ckpt, tmp_path / "strict", tolerance=-1.0)
     assert _leftovers(tmp_path / "strict") == []
 
 
 # ----------------------------------------------------------------------------- bad input
+
 
 class Payload:
     """A pickle that would create a folder when unpickled."""
@@ -352,13 +497,23 @@ def test_bad_inputs_give_one_clear_message_and_no_outputs(ckpt, frames_dir, tmp_
     cfg = load_config(overrides=SMALL[:-1] + ["model.num_layers=18"]).to_dict()
     wrong = tmp_path / "wrong.pt"
     save_checkpoint(wrong, {"config": cfg, "model": torch.load(ckpt, weights_only=True)["model"]})
-    _fails(["predict", "--checkpoint", str(wrong), "--input", str(frames_dir)], tmp_path / "o5", capsys,
-           str(wrong), "architecture")
+    _fails(
+        ["predict", "--checkpoint", str(wrong), "--input", str(frames_dir)],
+        tmp_path / "o5",
+        capsys,
+        str(wrong),
+        "architecture",
+    )
 
     evil = tmp_path / "evil.pt"
     torch.save({"config": {}, "model": Payload(tmp_path / "pwned")}, evil)
-    _fails(["predict", "--checkpoint", str(evil), "--input", str(frames_dir)], tmp_path / "o6", capsys,
-           str(evil), "refused")
+    _fails(
+        ["predict", "--checkpoint", str(evil), "--input", str(frames_dir)],
+        tmp_path / "o6",
+        capsys,
+        str(evil),
+        "refused",
+    )
     assert not (tmp_path / "pwned").exists()
     _fails(["export", "--checkpoint", str(evil)], tmp_path / "o7", capsys, str(evil))
 

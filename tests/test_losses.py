@@ -2,13 +2,19 @@ import pytest
 import torch
 
 from posecons.geometry import invert_pose, pose_vec_to_mat
-from posecons.losses import (cycle_loss, forward_backward_loss, identity_loss, min_reprojection,
-                             photometric_error, smoothness_loss, ssim_dissimilarity)
+from posecons.losses import (
+    cycle_loss,
+    forward_backward_loss,
+    identity_loss,
+    min_reprojection,
+    photometric_error,
+    smoothness_loss,
+    ssim_dissimilarity,
+)
 
 
 def poses(b=4):
-    return pose_vec_to_mat(torch.randn(b, 1, 3, dtype=torch.float64) * 0.1,
-                           torch.randn(b, 1, 3, dtype=torch.float64))
+    return pose_vec_to_mat(torch.randn(b, 1, 3, dtype=torch.float64) * 0.1, torch.randn(b, 1, 3, dtype=torch.float64))
 
 
 def test_ssim_of_image_with_itself_is_zero():
@@ -19,10 +25,11 @@ def test_ssim_of_image_with_itself_is_zero():
 
 def test_ssim_hand_computed_constant_images():
     # Constant images a, b: μ = a, b, σ = 0, so SSIM = (2ab + C1) / (a² + b² + C1).
-    a, b, c1 = 0.2, 0.6, 0.01 ** 2
+    a, b, c1 = 0.2, 0.6, 0.01**2
     ssim = (2 * a * b + c1) / (a * a + b * b + c1)
-    out = ssim_dissimilarity(torch.full((1, 1, 4, 4), a, dtype=torch.float64),
-                             torch.full((1, 1, 4, 4), b, dtype=torch.float64))
+    out = ssim_dissimilarity(
+        torch.full((1, 1, 4, 4), a, dtype=torch.float64), torch.full((1, 1, 4, 4), b, dtype=torch.float64)
+    )
     assert torch.allclose(out, torch.full_like(out, (1 - ssim) / 2), atol=1e-6)
 
 
@@ -30,7 +37,7 @@ def test_photometric_error_hand_checked():
     pred = torch.zeros(1, 3, 4, 4)
     target = torch.zeros(1, 3, 4, 4)
     target[:, 0] = 0.3  # one channel differs by 0.3 everywhere: mean_c L1 = 0.1
-    a, b, c1 = 0.0, 0.3, 0.01 ** 2
+    a, b, c1 = 0.0, 0.3, 0.01**2
     dssim_c0 = (1 - (2 * a * b + c1) / (a * a + b * b + c1)) / 2
     expected = 0.85 * dssim_c0 / 3 + 0.15 * 0.1
     pe = photometric_error(pred, target)

@@ -119,8 +119,9 @@ def test_rpe_of_a_known_error():
     stretched[:, :3, 3] *= 1.1
     r = relative_pose_error(stretched, G)
     # Each segment ends at the first frame beyond L, floor(L) + 1 frames on: error 0.1·(floor(L) + 1) / L.
-    expected = [0.1 * (np.floor(L) + 1) / L for L in r["rpe_lengths"] for first in range(60)
-                if first + np.floor(L) + 1 < 60]
+    expected = [
+        0.1 * (np.floor(L) + 1) / L for L in r["rpe_lengths"] for first in range(60) if first + np.floor(L) + 1 < 60
+    ]
     assert r["rpe_n_segments"] == len(expected)
     assert r["rpe_trans"] == pytest.approx(100 * np.mean(expected))
     assert r["rpe_rot"] == pytest.approx(0.0, abs=1e-9)

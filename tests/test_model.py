@@ -13,8 +13,13 @@ ALL = ["fb", "id", "cyc"]
 
 
 def make_config(constraints=(), **extra):
-    sets = [f"model.height={H}", f"model.width={W}", "model.pretrained=false", "model.num_layers=10",
-            f"loss.constraints=[{','.join(constraints)}]"] + [f"{k}={v}" for k, v in extra.items()]
+    sets = [
+        f"model.height={H}",
+        f"model.width={W}",
+        "model.pretrained=false",
+        "model.num_layers=10",
+        f"loss.constraints=[{','.join(constraints)}]",
+    ] + [f"{k}={v}" for k, v in extra.items()]
     return load_config(overrides=sets)
 
 
@@ -54,7 +59,7 @@ class ConstantDepth(nn.Module):
 
     def forward(self, images):
         b, _, h, w = images.shape
-        return {s: torch.full((b, 1, h // 2 ** s, w // 2 ** s), self.value) for s in range(4)}
+        return {s: torch.full((b, 1, h // 2**s, w // 2**s), self.value) for s in range(4)}
 
 
 class ForwardMotion(nn.Module):
@@ -106,7 +111,7 @@ def world_poses(frame_ids, rotation: float = 0.0, step=(1.0, 0.0, 0.0), seed: in
 def sliding_scene(shift_px: int, frame_ids, b: int = 2):
     """Fronto-parallel textured plane; frame f sees the texture shifted by f·shift_px pixels."""
     tex = torch.nn.functional.avg_pool2d(torch.rand(b, 3, H, W + 8 * shift_px), 3, 1, 1)
-    frames = [tex[..., 4 * shift_px + f * shift_px: 4 * shift_px + f * shift_px + W] for f in frame_ids]
+    frames = [tex[..., 4 * shift_px + f * shift_px : 4 * shift_px + f * shift_px + W] for f in frame_ids]
     return torch.stack(frames, 1)
 
 
@@ -180,6 +185,7 @@ def test_rotating_trajectory_gives_true_poses_and_zero_constraints():
     assert losses["id"].item() == pytest.approx(0, abs=1e-6)
     # The same recipe with the composition reversed is far from zero: the test can tell them apart.
     from posecons.losses import cycle_loss
+
     T = {f: outputs["poses"][f].double() for f in (-1, 1)}  # T_{f←0}
     skip = (torch.linalg.inv(world[1]) @ world[-1]).expand(2, 4, 4)
     first, second = torch.linalg.inv(T[-1]), T[1]  # T_{0←−1}, T_{+1←0}

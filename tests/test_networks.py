@@ -9,20 +9,21 @@ from posecons.errors import PoseconsError
 from posecons.networks import DepthNet, PoseNet, ResnetEncoder
 
 
-@pytest.mark.parametrize("layers,channels", [(10, [64, 64, 128, 256, 512]), (18, [64, 64, 128, 256, 512]),
-                                             (50, [64, 256, 512, 1024, 2048])])
+@pytest.mark.parametrize(
+    "layers,channels", [(10, [64, 64, 128, 256, 512]), (18, [64, 64, 128, 256, 512]), (50, [64, 256, 512, 1024, 2048])]
+)
 def test_encoder_feature_pyramid(layers, channels):
     enc = ResnetEncoder(layers)
     feats = enc(torch.rand(1, 3, 64, 96))
     assert [f.shape[1] for f in feats] == channels == enc.num_ch_enc
-    assert [f.shape[-2:] for f in feats] == [(64 // 2 ** i, 96 // 2 ** i) for i in range(1, 6)]
+    assert [f.shape[-2:] for f in feats] == [(64 // 2**i, 96 // 2**i) for i in range(1, 6)]
 
 
 def test_depth_net_outputs_four_sigmoid_scales():
     disps = DepthNet(10)(torch.rand(2, 3, 64, 128))
     assert sorted(disps) == [0, 1, 2, 3]
     for s, d in disps.items():
-        assert d.shape == (2, 1, 64 // 2 ** s, 128 // 2 ** s)
+        assert d.shape == (2, 1, 64 // 2**s, 128 // 2**s)
         assert (d > 0).all() and (d < 1).all()
 
 
@@ -58,6 +59,7 @@ def test_pretrained_pose_conv1_is_tiled_and_halved(monkeypatch):
 def test_offline_pretrained_auto_warns_and_required_raises(monkeypatch):
     def offline(*args, **kwargs):
         raise URLError("no network")
+
     monkeypatch.setattr(tvm.ResNet18_Weights.IMAGENET1K_V1, "get_state_dict", offline)
     with pytest.warns(UserWarning, match="Training from scratch"):
         assert networks.load_imagenet_state(18, "auto") is None

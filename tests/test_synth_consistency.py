@@ -41,7 +41,7 @@ def test_true_depth_and_pose_explain_the_motion(data, frame):
     depth = torch.tensor(np.where(depth > 0, depth, 1e3), dtype=torch.float32).view(1, 1, H, W)  # sky: far
     target = sample["frames"][0:1]
     for i, offset in ((1, -1), (2, 1)):
-        source = sample["frames"][i:i + 1]
+        source = sample["frames"][i : i + 1]
         T = np.linalg.inv(drive.camera_pose(rig, frame + offset, 2)) @ world_from_target  # T_{source←target}
         warped = warp(source, depth, torch.tensor(T, dtype=torch.float32)[None], K)
         assert photometric_error(warped, target).mean() < 0.7 * photometric_error(source, target).mean()

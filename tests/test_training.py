@@ -19,9 +19,18 @@ from posecons.errors import PoseconsError
 from posecons.training.trainer import Trainer, train
 
 pytestmark = pytest.mark.slow
-TINY = ["data.split=synth", "model.height=64", "model.width=192", "model.num_layers=10", "model.pretrained=false",
-        "train.batch_size=2", "data.num_workers=0", "train.val_samples=4", "train.log_every=1",
-        "train.image_every=2"]
+TINY = [
+    "data.split=synth",
+    "model.height=64",
+    "model.width=192",
+    "model.num_layers=10",
+    "model.pretrained=false",
+    "train.batch_size=2",
+    "data.num_workers=0",
+    "train.val_samples=4",
+    "train.log_every=1",
+    "train.image_every=2",
+]
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +101,9 @@ def _offline(monkeypatch):
 
     def offline(*args, **kwargs):
         from urllib.error import URLError
+
         raise URLError("no network")
+
     monkeypatch.setattr(tvm.ResNet18_Weights.IMAGENET1K_V1, "get_state_dict", offline)
 
 
@@ -104,8 +115,12 @@ def test_paper_preset_offline_stops_and_auto_records_scratch(synth_data, tmp_pat
         Trainer(paper, synth_data, tmp_path / "paper", quiet=True)
     assert not (tmp_path / "paper" / "checkpoints").exists()
     with pytest.warns(UserWarning, match="Training from scratch") as caught:
-        summary = train(load_config(overrides=small + ["model.pretrained=auto", "train.max_steps=1"]), synth_data,
-                        tmp_path / "auto", quiet=True)
+        summary = train(
+            load_config(overrides=small + ["model.pretrained=auto", "train.max_steps=1"]),
+            synth_data,
+            tmp_path / "auto",
+            quiet=True,
+        )
     assert len([w for w in caught if "ImageNet" in str(w.message)]) == 1  # one message, not one per encoder
     assert summary["initialisation"] == "random (trained from scratch)"
     assert load_config(tmp_path / "auto" / "config.yaml").model.pretrained is False  # "auto" resolved
@@ -114,6 +129,7 @@ def test_paper_preset_offline_stops_and_auto_records_scratch(synth_data, tmp_pat
 
 def test_pretrained_run_records_imagenet_and_resumes_offline(synth_data, tmp_path, monkeypatch):
     import torchvision.models as tvm
+
     state = tvm.resnet18().state_dict()
     monkeypatch.setattr(tvm.ResNet18_Weights.IMAGENET1K_V1, "get_state_dict", lambda *a, **k: dict(state))
     small = [o for o in TINY if "num_layers" not in o and "pretrained" not in o] + ["model.num_layers=18"]
@@ -130,8 +146,12 @@ def test_pretrained_run_records_imagenet_and_resumes_offline(synth_data, tmp_pat
 
 
 def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, tmp_path):
-    trainer = Trainer(tiny_config("train.precision=bf16", "train.max_steps=1", "train.val_every=0"), synth_data,
-                      tmp_path / "run", quiet=True)
+    trainer = Trainer(
+        tiny_config("train.precision=bf16", "train.max_steps=1", "train.val_every=0"),
+        synth_data,
+        tmp_path / "run",
+        quiet=True,
+    )
     dtypes = []
     trainer.model.depth_net.encoder.net.layer4.register_forward_hook(lambda m, i, o: dtypes.append(o.dtype))
     trainer.fit()
@@ -142,6 +162,7 @@ def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, t
 
 def test_deterministic_mode_on_cuda_warns_instead_of_raising(monkeypatch):
     from posecons.training.trainer import use_deterministic_algorithms
+
     monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
     before = torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled()
     try:
@@ -161,8 +182,14 @@ def final_weights(run: Path) -> dict:
 def test_killed_run_resumes_to_identical_weights(synth_data, tmp_path):
     args = ["train", "--config", str(tmp_path / "c.yaml"), "--data-path", str(synth_data), "--quiet"]
     (tmp_path / "c.yaml").write_text("loss:\n  constraints: [fb, id, cyc]\n  identity_fraction: 0.5\n")
-    sets = sum([["--set", s] for s in TINY + ["train.deterministic=true", "train.checkpoint_every=1",
-                                              "train.max_steps=8", "train.val_every=0"]], [])
+    sets = sum(
+        [
+            ["--set", s]
+            for s in TINY
+            + ["train.deterministic=true", "train.checkpoint_every=1", "train.max_steps=8", "train.val_every=0"]
+        ],
+        [],
+    )
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     subprocess.run(posecons_cmd(*args, "--out", str(tmp_path / "full"), *sets), check=True, env=env)
 
@@ -178,8 +205,11 @@ def test_killed_run_resumes_to_identical_weights(synth_data, tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert 3 <= load_checkpoint(last)["step"] < 8
-    subprocess.run(posecons_cmd("train", "--data-path", str(synth_data), "--out", str(interrupted), "--resume",
-                                "--quiet"), check=True, env=env)
+    subprocess.run(
+        posecons_cmd("train", "--data-path", str(synth_data), "--out", str(interrupted), "--resume", "--quiet"),
+        check=True,
+        env=env,
+    )
     full, resumed = final_weights(tmp_path / "full"), final_weights(interrupted)
     assert load_checkpoint(last)["step"] == 8
     for key in full:
@@ -202,9 +232,24 @@ def test_two_process_ddp_ranks_agree(synth_data, tmp_path):
     script = tmp_path / "ddp.py"
     script.write_text(DDP_SCRIPT)
     run = tmp_path / "ddp"
-    subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node=2",
-                    str(script), str(synth_data), str(run), *TINY, "train.max_steps=3", "loss.constraints=[cyc]"],
-                   check=True, env={**os.environ, "OMP_NUM_THREADS": "1"}, timeout=600)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "torch.distributed.run",
+            "--standalone",
+            "--nproc-per-node=2",
+            str(script),
+            str(synth_data),
+            str(run),
+            *TINY,
+            "train.max_steps=3",
+            "loss.constraints=[cyc]",
+        ],
+        check=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        timeout=600,
+    )
     w0 = torch.load(run / "rank0.pt", weights_only=True)
     w1 = torch.load(run / "rank1.pt", weights_only=True)
     initial = Trainer(tiny_config("loss.constraints=[cyc]"), synth_data, tmp_path / "init", quiet=True).model
@@ -221,8 +266,15 @@ def test_short_overfit_lowers_photometric_loss(synth_data, tmp_path):
     lines = (synth_data / "splits" / "synth" / "train_files.txt").read_text().splitlines()[:4]
     (split / "train_files.txt").write_text("\n".join(lines) + "\n")
     (split / "val_files.txt").write_text("\n".join(lines) + "\n")
-    cfg = tiny_config("train.lr=1e-3", "train.epochs=20", "train.val_every=40", "data.flip_prob=0",
-                      "data.jitter_prob=0", "train.val_samples=4", "train.keep_epochs=2")
+    cfg = tiny_config(
+        "train.lr=1e-3",
+        "train.epochs=20",
+        "train.val_every=40",
+        "data.flip_prob=0",
+        "data.jitter_prob=0",
+        "train.val_samples=4",
+        "train.keep_epochs=2",
+    )
     trainer = Trainer(cfg, synth_data, tmp_path / "run", split_dir=split, quiet=True)
     before = trainer.validator.run(trainer.model, 0)["val_photometric"]
     trainer.fit()
@@ -253,14 +305,16 @@ def test_bad_input_is_reported_before_training(synth_data, tmp_path):
 
 
 def test_non_finite_loss_is_skipped_then_stops(synth_data, tmp_path, monkeypatch):
-    trainer = Trainer(tiny_config("train.max_steps=10", "train.max_bad_steps=3"), synth_data, tmp_path / "run",
-                      quiet=True)
+    trainer = Trainer(
+        tiny_config("train.max_steps=10", "train.max_bad_steps=3"), synth_data, tmp_path / "run", quiet=True
+    )
     original = trainer.model.forward
 
     def poisoned(batch, step=0):
         outputs, losses = original(batch, step)
         losses["total"] = losses["total"] * float("nan") if step >= 2 else losses["total"]
         return outputs, losses
+
     monkeypatch.setattr(trainer.model, "forward", poisoned)
     with pytest.raises(PoseconsError, match="not finite for 3 steps in a row"):
         trainer.fit()

@@ -14,9 +14,18 @@ from posecons.checkpoint import load_checkpoint
 from posecons.cli import main as cli
 
 pytestmark = pytest.mark.slow
-TINY = ["data.split=synth", "model.height=64", "model.width=192", "model.num_layers=10", "model.pretrained=false",
-        "train.batch_size=2", "data.num_workers=0", "train.val_samples=2", "train.image_every=0",
-        "train.checkpoint_every=0"]
+TINY = [
+    "data.split=synth",
+    "model.height=64",
+    "model.width=192",
+    "model.num_layers=10",
+    "model.pretrained=false",
+    "train.batch_size=2",
+    "data.num_workers=0",
+    "train.val_samples=2",
+    "train.image_every=0",
+    "train.checkpoint_every=0",
+]
 
 
 @pytest.fixture(scope="module")
@@ -31,10 +40,23 @@ def _sets(*extra: str) -> list[str]:
 def _interrupt(synth_data: Path, run: Path, signum: int) -> int:
     """Start a training run with a loader worker, send ``signum`` to its process group (as Ctrl-C does)
     once it is in its loop; check the one-line message and return the step saved in last.pt."""
-    args = [sys.executable, "-m", "posecons.cli", "train", "--config", "kitti/baseline", "--data-path", str(synth_data),
-            "--out", str(run), "--quiet", *_sets("train.max_steps=6", "train.val_every=1", "data.num_workers=1")]
-    proc = subprocess.Popen(args, env={**os.environ, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    args = [
+        sys.executable,
+        "-m",
+        "posecons.cli",
+        "train",
+        "--config",
+        "kitti/baseline",
+        "--data-path",
+        str(synth_data),
+        "--out",
+        str(run),
+        "--quiet",
+        *_sets("train.max_steps=6", "train.val_every=1", "data.num_workers=1"),
+    ]
+    proc = subprocess.Popen(
+        args, env={**os.environ, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
     deadline = time.time() + 300
     while time.time() < deadline and proc.poll() is None and not (run / "metrics.jsonl").is_file():
         time.sleep(0.05)  # the first validation ran: the loop is going
@@ -67,16 +89,43 @@ def test_ctrl_c_then_resume_reports_the_total_time(synth_data, tmp_path):
 
 def test_run_that_fails_before_training_leaves_no_folder(synth_data, tmp_path, capsys):
     out = tmp_path / "new" / "run"
-    assert cli(["train", "--config", "kitti/baseline", "--data-path", str(synth_data), "--out", str(out),
-                *_sets("train.batch_size=1000")]) == 2
+    assert (
+        cli(
+            [
+                "train",
+                "--config",
+                "kitti/baseline",
+                "--data-path",
+                str(synth_data),
+                "--out",
+                str(out),
+                *_sets("train.batch_size=1000"),
+            ]
+        )
+        == 2
+    )
     assert "fewer than one batch" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # neither the run folder nor the parent it created
 
 
 def test_resume_from_a_weights_only_checkpoint_is_refused(synth_data, tmp_path, capsys):
     run = tmp_path / "run"
-    assert cli(["train", "--config", "kitti/baseline", "--data-path", str(synth_data), "--out", str(run), "--quiet",
-                *_sets("train.max_steps=1", "train.val_every=1")]) == 0
+    assert (
+        cli(
+            [
+                "train",
+                "--config",
+                "kitti/baseline",
+                "--data-path",
+                str(synth_data),
+                "--out",
+                str(run),
+                "--quiet",
+                *_sets("train.max_steps=1", "train.val_every=1"),
+            ]
+        )
+        == 0
+    )
     (run / "checkpoints" / "best.pt").replace(run / "checkpoints" / "last.pt")
     assert cli(["train", "--data-path", str(synth_data), "--out", str(run), "--resume"]) == 2
     assert "holds no training state" in capsys.readouterr().err
@@ -85,9 +134,29 @@ def test_resume_from_a_weights_only_checkpoint_is_refused(synth_data, tmp_path, 
 def test_ctrl_c_during_synth_leaves_nothing(tmp_path):
     """Ctrl-C reaches the whole process group (parent and render workers): one line, exit 130, no output."""
     out = tmp_path / "new" / "synth"
-    proc = subprocess.Popen([sys.executable, "-m", "posecons.cli", "synth", "--out", str(out), "--drives", "4",
-                             "--frames", "60", "--width", "320", "--height", "96", "--workers", "2"],
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "posecons.cli",
+            "synth",
+            "--out",
+            str(out),
+            "--drives",
+            "4",
+            "--frames",
+            "60",
+            "--width",
+            "320",
+            "--height",
+            "96",
+            "--workers",
+            "2",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None and not list(out.parent.glob(".synth.partial-*/2020_01_01")):
         time.sleep(0.05)  # rendering has begun

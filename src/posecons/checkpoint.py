@@ -37,12 +37,15 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     except pickle.UnpicklingError as exc:
         unsafe = [line.strip() for line in str(exc).splitlines() if "GLOBAL" in line]  # a blocked import
         if unsafe:
-            raise PoseconsError(f"{path}: refused to load — it holds objects other than weights and plain "
-                                f"data (not a posecons checkpoint, or unsafe): {unsafe[0]}") from exc
+            raise PoseconsError(
+                f"{path}: refused to load — it holds objects other than weights and plain "
+                f"data (not a posecons checkpoint, or unsafe): {unsafe[0]}"
+            ) from exc
         raise PoseconsError(f"{path}: not a readable checkpoint (damaged, or not written by torch.save)") from exc
     except Exception as exc:  # damaged bytes surface as almost any error type inside torch.load
-        raise PoseconsError(f"{path}: not a readable checkpoint (damaged, or not written by torch.save: "
-                            f"{type(exc).__name__})") from exc
+        raise PoseconsError(
+            f"{path}: not a readable checkpoint (damaged, or not written by torch.save: {type(exc).__name__})"
+        ) from exc
     if not isinstance(state, dict) or "config" not in state or "model" not in state:
         raise PoseconsError(f"{path}: not a posecons checkpoint (no 'config' and 'model' entries)")
     return state
@@ -63,8 +66,10 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
     try:
         model.load_state_dict(weights)
     except RuntimeError as exc:
-        raise PoseconsError(f"{path}: weights do not fit the architecture in its config "
-                            f"(ResNet-{config.model.num_layers}): {str(exc).splitlines()[0]}") from exc
+        raise PoseconsError(
+            f"{path}: weights do not fit the architecture in its config "
+            f"(ResNet-{config.model.num_layers}): {str(exc).splitlines()[0]}"
+        ) from exc
     return model.to(map_location).eval(), config
 
 
@@ -76,11 +81,16 @@ def describe_checkpoint(path: str | Path) -> dict[str, Any]:
         return {"file": str(path), "selected_by": "exported weights (see the run they came from)"}
     state = load_checkpoint(path)
     criterion = state.get("selected_by")
-    return {"file": str(path), "step": state.get("step"),
-            "selected_by": (f"lowest validation {criterion}" + (" (ground truth)" if criterion == "abs_rel" else
-                                                                " (no ground truth)")
-                            if criterion else "none: the weights at that step"),
-            "initialisation": state.get("initialisation", "not recorded")}
+    return {
+        "file": str(path),
+        "step": state.get("step"),
+        "selected_by": (
+            f"lowest validation {criterion}" + (" (ground truth)" if criterion == "abs_rel" else " (no ground truth)")
+            if criterion
+            else "none: the weights at that step"
+        ),
+        "initialisation": state.get("initialisation", "not recorded"),
+    }
 
 
 def _config(data: Any, path: Path) -> Config:

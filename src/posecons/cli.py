@@ -31,15 +31,18 @@ COMMAND_MODULES = (
 
 def _number(kind: type, test: Callable[[float], bool], rule: str) -> Callable[[str], float]:
     """An argparse ``type`` that accepts a finite ``kind`` (int or float) passing ``test``."""
+
     def parse(text: str):
         try:
             value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
-                                             f"got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if kind is int else 'a number'}, got {text!r}"
+            ) from None
         if not (math.isfinite(value) and test(value)):
             raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
         return value
+
     return parse
 
 
@@ -65,6 +68,7 @@ def _writable(folder: bool) -> Callable[[str], Path]:
             return check_writable(Path(text), folder)
         except PoseconsError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
+
     return parse
 
 

@@ -30,19 +30,37 @@ def _at_least(low: float) -> tuple:
 _FRACTION = (lambda v: 0 <= v <= 1, "must be in [0, 1]")
 _POSITIVE = (lambda v: v > 0, "must be > 0")
 RANGES = {  # "section.key": (test, what a valid value is); every float must also be finite
-    "model.min_depth": _POSITIVE, "model.max_depth": _POSITIVE,
-    "model.scales": (lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
-                     "must be distinct scales from 0–3, e.g. [0, 1, 2, 3]"),
-    "loss.ssim_weight": _FRACTION, "loss.identity_fraction": _FRACTION,
-    "loss.smoothness_weight": _at_least(0), "loss.fb_weight": _at_least(0), "loss.id_weight": _at_least(0),
-    "loss.cyc_weight": _at_least(0), "loss.constraint_start_step": _at_least(0),
-    "data.split": (bool, "must name a split"), "data.img_ext": (bool, "must be an extension such as .png"),
-    "data.flip_prob": _FRACTION, "data.jitter_prob": _FRACTION, "data.num_workers": _at_least(0),
-    "train.batch_size": _at_least(1), "train.lr": _POSITIVE, "train.epochs": _at_least(1),
+    "model.min_depth": _POSITIVE,
+    "model.max_depth": _POSITIVE,
+    "model.scales": (
+        lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
+        "must be distinct scales from 0–3, e.g. [0, 1, 2, 3]",
+    ),
+    "loss.ssim_weight": _FRACTION,
+    "loss.identity_fraction": _FRACTION,
+    "loss.smoothness_weight": _at_least(0),
+    "loss.fb_weight": _at_least(0),
+    "loss.id_weight": _at_least(0),
+    "loss.cyc_weight": _at_least(0),
+    "loss.constraint_start_step": _at_least(0),
+    "data.split": (bool, "must name a split"),
+    "data.img_ext": (bool, "must be an extension such as .png"),
+    "data.flip_prob": _FRACTION,
+    "data.jitter_prob": _FRACTION,
+    "data.num_workers": _at_least(0),
+    "train.batch_size": _at_least(1),
+    "train.lr": _POSITIVE,
+    "train.epochs": _at_least(1),
     "train.lr_decay_epochs": (lambda v: all(e >= 1 for e in v), "must be epochs ≥ 1"),
-    "train.lr_decay": _POSITIVE, "train.grad_accum": _at_least(1), "train.seed": _at_least(0),
-    "train.max_steps": _at_least(0), "train.log_every": _at_least(1), "train.image_every": _at_least(0),
-    "train.val_samples": _at_least(1), "train.checkpoint_every": _at_least(0), "train.max_bad_steps": _at_least(1),
+    "train.lr_decay": _POSITIVE,
+    "train.grad_accum": _at_least(1),
+    "train.seed": _at_least(0),
+    "train.max_steps": _at_least(0),
+    "train.log_every": _at_least(1),
+    "train.image_every": _at_least(0),
+    "train.val_samples": _at_least(1),
+    "train.checkpoint_every": _at_least(0),
+    "train.max_bad_steps": _at_least(1),
 }
 
 
@@ -130,8 +148,10 @@ class Config:
         elif t.val_every == 0:  # the old spelling of "epoch", in the configs of earlier runs
             t.val_every = "epoch"
         if t.val_every not in ("epoch", "off") and (type(t.val_every) is not int or t.val_every < 1):
-            raise PoseconsError(f"train.val_every must be a number of steps ≥ 1, \"epoch\" (after each epoch) "
-                                f"or \"off\"; got {t.val_every!r}")
+            raise PoseconsError(
+                f'train.val_every must be a number of steps ≥ 1, "epoch" (after each epoch) '
+                f'or "off"; got {t.val_every!r}'
+            )
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(
                 f"model.height/width must be positive multiples of 32 (the encoder downsamples 32×); "
@@ -150,16 +170,22 @@ class Config:
         if bad:
             raise PoseconsError(f"loss.constraints: unknown {bad}; choose from {list(CONSTRAINTS)}")
         if "cyc" in lo.constraints and not (min(m.frame_ids) < 0 < max(m.frame_ids)):
-            raise PoseconsError("the cyc constraint needs model.frame_ids to hold a past and a future frame, "
-                                f"e.g. [0, -1, 1]; got {m.frame_ids}")
+            raise PoseconsError(
+                "the cyc constraint needs model.frame_ids to hold a past and a future frame, "
+                f"e.g. [0, -1, 1]; got {m.frame_ids}"
+            )
         if lo.translation_norm not in ("sum", "mean"):
             raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
         if self.train.precision not in ("32", "bf16", "16"):
             raise PoseconsError(f"train.precision must be '32', 'bf16' or '16', got {self.train.precision!r}")
         if self.train.best_metric not in ("val_photometric", "abs_rel"):
-            raise PoseconsError(f"train.best_metric must be 'val_photometric' or 'abs_rel', got {self.train.best_metric!r}")
+            raise PoseconsError(
+                f"train.best_metric must be 'val_photometric' or 'abs_rel', got {self.train.best_metric!r}"
+            )
         if self.train.keep_epochs < -1:
-            raise PoseconsError(f"train.keep_epochs must be -1 (keep all), 0 (none) or a count, got {self.train.keep_epochs}")
+            raise PoseconsError(
+                f"train.keep_epochs must be -1 (keep all), 0 (none) or a count, got {self.train.keep_epochs}"
+            )
         if self.data.dataset not in ("kitti_raw", "kitti_odom"):
             raise PoseconsError(f"data.dataset must be kitti_raw or kitti_odom, got {self.data.dataset!r}")
         return self
@@ -267,8 +293,9 @@ def parse_override(item: str) -> dict[str, Any]:
     return value
 
 
-def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (),
-                base: dict[str, Any] | None = None) -> Config:
+def load_config(
+    path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), base: dict[str, Any] | None = None
+) -> Config:
     """Defaults ← ``base`` dict (e.g. a checkpoint's config) ← preset file (and its bases) ← overrides."""
     config = Config()
     layers = ([base] if base else []) + (_read_preset(Path(path)) if path else [])

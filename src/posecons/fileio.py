@@ -158,12 +158,14 @@ def output_dir(out: str | Path) -> Iterator[Path]:
         raise PoseconsError(f"{out}: output path exists and is not a folder")
     fresh = not out.exists()
     if not fresh and any(out.iterdir()) and _read_manifest(out) is None:
-        raise PoseconsError(f"{out}: output folder is not empty and holds files posecons did not write; "
-                            "choose a new or empty folder")
+        raise PoseconsError(
+            f"{out}: output folder is not empty and holds files posecons did not write; choose a new or empty folder"
+        )
     created = make_dirs(out.parent) if fresh else []
     try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-" if fresh else ".partial-",
-                                        dir=out.parent if fresh else out))
+        staging = Path(
+            tempfile.mkdtemp(prefix=f".{out.name}.partial-" if fresh else ".partial-", dir=out.parent if fresh else out)
+        )
     except OSError as exc:
         remove_empty(created)
         raise PoseconsError(f"{out}: cannot write here ({exc.strerror or exc})") from exc
@@ -187,8 +189,10 @@ def _merge(staging: Path, out: Path, new: list[str]) -> None:
     old = _read_manifest(out) or set()
     foreign = [name for name in new if (out / name).exists() and name not in old]
     if foreign:
-        raise PoseconsError(f"{out / foreign[0]}: exists and was not written by posecons; "
-                            "refusing to replace it (choose a new or empty folder)")
+        raise PoseconsError(
+            f"{out / foreign[0]}: exists and was not written by posecons; "
+            "refusing to replace it (choose a new or empty folder)"
+        )
     for name in sorted(old - set(new)):  # stale outputs of the earlier run
         with contextlib.suppress(FileNotFoundError):
             (out / name).unlink()

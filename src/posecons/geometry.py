@@ -27,7 +27,7 @@ def check_tensor(name: str, x: object, shape: tuple) -> torch.Tensor:
     fixed = shape[1:] if shape and shape[0] is ... else shape
     ok = x.dim() >= len(fixed) if shape and shape[0] is ... else x.dim() == len(fixed)
     if ok:
-        tail = x.shape[x.dim() - len(fixed):]
+        tail = x.shape[x.dim() - len(fixed) :]
         ok = all(s is None or s == t for s, t in zip(fixed, tail))
     if not ok:
         raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
@@ -35,6 +35,7 @@ def check_tensor(name: str, x: object, shape: tuple) -> torch.Tensor:
 
 
 # ----------------------------------------------------------------------------- SE(3)
+
 
 def axis_angle_to_matrix(axisangle: torch.Tensor) -> torch.Tensor:
     """Rodrigues' formula: (..., 3) axis-angle → (..., 3, 3) rotation.
@@ -100,6 +101,7 @@ def pose_distance(T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum
 
 
 # ----------------------------------------------------------------------------- camera
+
 
 def disp_to_depth(disp: torch.Tensor, min_depth: float, max_depth: float) -> tuple[torch.Tensor, torch.Tensor]:
     """Sigmoid output → (scaled disparity in [1/max, 1/min], depth = 1/scaled)."""
@@ -187,7 +189,19 @@ def warp(source: torch.Tensor, depth: torch.Tensor, T: torch.Tensor, K: torch.Te
 
 
 __all__ = [
-    "axis_angle_to_matrix", "backproject", "check_tensor", "disp_to_depth", "flip_intrinsics", "invert_pose",
-    "make_pose", "pixel_grid", "pixels_to_grid", "pose_distance", "pose_vec_to_mat", "project",
-    "scale_intrinsics", "transform_points", "warp",
+    "axis_angle_to_matrix",
+    "backproject",
+    "check_tensor",
+    "disp_to_depth",
+    "flip_intrinsics",
+    "invert_pose",
+    "make_pose",
+    "pixel_grid",
+    "pixels_to_grid",
+    "pose_distance",
+    "pose_vec_to_mat",
+    "project",
+    "scale_intrinsics",
+    "transform_points",
+    "warp",
 ]

@@ -19,13 +19,13 @@ def ssim_dissimilarity(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     """
     check_tensor("x", x, _IMAGE)
     check_tensor("y", y, tuple(x.shape))
-    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    c1, c2 = 0.01**2, 0.03**2
     x, y = F.pad(x, (1, 1, 1, 1), mode="reflect"), F.pad(y, (1, 1, 1, 1), mode="reflect")
     mu_x, mu_y = F.avg_pool2d(x, 3, 1), F.avg_pool2d(y, 3, 1)
-    var_x = F.avg_pool2d(x * x, 3, 1) - mu_x ** 2
-    var_y = F.avg_pool2d(y * y, 3, 1) - mu_y ** 2
+    var_x = F.avg_pool2d(x * x, 3, 1) - mu_x**2
+    var_y = F.avg_pool2d(y * y, 3, 1) - mu_y**2
     cov = F.avg_pool2d(x * y, 3, 1) - mu_x * mu_y
-    ssim = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x ** 2 + mu_y ** 2 + c1) * (var_x + var_y + c2))
+    ssim = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x**2 + mu_y**2 + c1) * (var_x + var_y + c2))
     return ((1 - ssim) / 2).clamp(0, 1)
 
 
@@ -37,7 +37,9 @@ def photometric_error(pred: torch.Tensor, target: torch.Tensor, ssim_weight: flo
     return ssim_weight * ssim_dissimilarity(pred, target).mean(1, keepdim=True) + (1 - ssim_weight) * l1
 
 
-def min_reprojection(reprojection: torch.Tensor, identity: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def min_reprojection(
+    reprojection: torch.Tensor, identity: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-pixel minimum over sources, with auto-masking (SPEC §4).
 
     reprojection: pe(warped_f, I_0) stacked over sources, (B, S, H, W); identity: pe(I_f, I_0)
@@ -72,6 +74,7 @@ def smoothness_loss(disp: torch.Tensor, img: torch.Tensor) -> torch.Tensor:
 
 # ----------------------------------------------------------------------------- pose constraints
 
+
 def forward_backward_loss(t_fwd: torch.Tensor, t_bwd: torch.Tensor, translation_norm: str = "sum") -> torch.Tensor:
     """mean d(T_{f←0}, inverse(T_{0←f})): the pose of a pair and of the reversed pair must be inverses.
 
@@ -87,8 +90,9 @@ def identity_loss(axisangle: torch.Tensor, translation: torch.Tensor) -> torch.T
     return (axisangle.abs().sum((1, 2)) + translation.abs().sum((1, 2))).mean()
 
 
-def cycle_loss(t_skip: torch.Tensor, t_second: torch.Tensor, t_first: torch.Tensor,
-               translation_norm: str = "sum") -> torch.Tensor:
+def cycle_loss(
+    t_skip: torch.Tensor, t_second: torch.Tensor, t_first: torch.Tensor, translation_norm: str = "sum"
+) -> torch.Tensor:
     """mean d(T_{+1←−1}, T_{+1←0} · T_{0←−1}): the skip pose must equal the composed pair.
 
     Arguments in the formula's reading order: t_skip T_{+1←−1}, t_second T_{+1←0}, t_first

@@ -18,8 +18,14 @@ import torch.nn.functional as F
 
 from .config import Config
 from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrinsics, warp
-from .losses import (cycle_loss, forward_backward_loss, identity_loss, min_reprojection,
-                     photometric_error, smoothness_loss)
+from .losses import (
+    cycle_loss,
+    forward_backward_loss,
+    identity_loss,
+    min_reprojection,
+    photometric_error,
+    smoothness_loss,
+)
 from .networks import DepthNet, PoseNet, imagenet_weights_name, load_imagenet_state
 
 
@@ -58,8 +64,11 @@ class PoseConsModel(nn.Module):
         self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
         self.pose_net = PoseNet(m.num_layers, imagenet)
         # How the encoders were initialised, for the run's config, checkpoints and reports.
-        self.initialisation = (f"ImageNet ({imagenet_weights_name(m.num_layers)})" if imagenet is not None
-                               else "random (trained from scratch)")
+        self.initialisation = (
+            f"ImageNet ({imagenet_weights_name(m.num_layers)})"
+            if imagenet is not None
+            else "random (trained from scratch)"
+        )
 
     # ------------------------------------------------------------------ inference API
     def predict_depth(self, images: torch.Tensor, scale: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -123,24 +132,35 @@ class PoseConsModel(nn.Module):
             losses, automask = self._view_synthesis_losses(frames.float(), K, disps, poses)
             # The paper's constraints (SPEC §5), each in the reading order of its equation.
             if "fb" in constraints:  # d(T_{f←0}, inverse(T_{0←f} from the reversed pair)) for each source
-                losses["fb"] = forward_backward_loss(torch.cat([poses[f] for f in sources]),
-                                                     torch.cat([P.T(0, f, input=temporal(f)[::-1]) for f in sources]),
-                                                     lo.translation_norm)
+                losses["fb"] = forward_backward_loss(
+                    torch.cat([poses[f] for f in sources]),
+                    torch.cat([P.T(0, f, input=temporal(f)[::-1]) for f in sources]),
+                    lo.translation_norm,
+                )
             if "id" in constraints:  # ‖e‖₁ + ‖t‖₁ of pose(I_0, I_0)
                 losses["id"] = identity_loss(*P.vector(0, 0))
             if "cyc" in constraints:  # d(T_{+n←−n}, T_{+n←0} · T_{0←−n})
                 prev, nxt = self.cycle_ids()
-                losses["cyc"] = cycle_loss(P.T(nxt, prev, input=(prev, nxt)), P.T(nxt, 0, input=temporal(nxt)),
-                                           P.T(0, prev, input=temporal(prev)), lo.translation_norm)
+                losses["cyc"] = cycle_loss(
+                    P.T(nxt, prev, input=(prev, nxt)),
+                    P.T(nxt, 0, input=temporal(nxt)),
+                    P.T(0, prev, input=temporal(prev)),
+                    lo.translation_norm,
+                )
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
             losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in constraints)
 
-        outputs = {"disp": disps, "poses": poses, "depth": disp_to_depth(disps[0], m.min_depth, m.max_depth)[1],
-                   "automask": automask}
+        outputs = {
+            "disp": disps,
+            "poses": poses,
+            "depth": disp_to_depth(disps[0], m.min_depth, m.max_depth)[1],
+            "automask": automask,
+        }
         return outputs, losses
 
-    def _view_synthesis_losses(self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict,
-                               poses: dict[int, torch.Tensor]) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    def _view_synthesis_losses(
+        self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict, poses: dict[int, torch.Tensor]
+    ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
         """Min-reprojection with auto-masking plus smoothness, averaged over scales (SPEC §3–4);
         also the full-scale auto-mask (B, H, W), True where a warped source won."""
         m, lo = self.config.model, self.config.loss
@@ -158,14 +178,19 @@ class PoseConsModel(nn.Module):
                 disp = F.interpolate(disp, size=size, mode="bilinear", align_corners=False)
             depth = disp_to_depth(disp, m.min_depth, m.max_depth)[1]
             K = scale_intrinsics(K_norm, *size)
-            reproj = torch.cat([photometric_error(warp(src, depth, poses[f], K), tgt, lo.ssim_weight)
-                                for f, src in zip(m.frame_ids[1:], srcs)], 1)
+            reproj = torch.cat(
+                [
+                    photometric_error(warp(src, depth, poses[f], K), tgt, lo.ssim_weight)
+                    for f, src in zip(m.frame_ids[1:], srcs)
+                ],
+                1,
+            )
             if lo.automask and (identity is None or lo.v1_multiscale):
                 identity = torch.cat([photometric_error(src, tgt, lo.ssim_weight) for src in srcs], 1)
             per_pixel, keep = min_reprojection(reproj, identity if lo.automask else None)
             automask = keep if automask is None else automask
             photo.append(per_pixel.mean())
-            smooth.append(lo.smoothness_weight / 2 ** s * smoothness_loss(disps[s].float(), _resize(target, hs, ws)))
+            smooth.append(lo.smoothness_weight / 2**s * smoothness_loss(disps[s].float(), _resize(target, hs, ws)))
         photometric = torch.stack(photo).mean()
         smoothness = torch.stack(smooth).mean()
         return {"photometric": photometric, "smoothness": smoothness, "total": photometric + smoothness}, automask

@@ -39,10 +39,12 @@ def load_imagenet_state(num_layers: int, pretrained: bool | str) -> dict | None:
             raise LookupError(f"no ImageNet weights exist for the ResNet-{num_layers} demo encoder")
         return weights.get_state_dict(progress=False, check_hash=True)
     except (URLError, OSError, RuntimeError, LookupError) as exc:
-        message = (f"ImageNet weights for ResNet-{num_layers} are not available ({exc}). "
-                   "With internet access torchvision downloads them into $TORCH_HOME/hub/checkpoints; "
-                   "offline, copy the file there, or train from scratch on purpose with "
-                   "--set model.pretrained=false.")
+        message = (
+            f"ImageNet weights for ResNet-{num_layers} are not available ({exc}). "
+            "With internet access torchvision downloads them into $TORCH_HOME/hub/checkpoints; "
+            "offline, copy the file there, or train from scratch on purpose with "
+            "--set model.pretrained=false."
+        )
         if pretrained is True:
             raise PoseconsError(message) from exc
         warnings.warn(message + " Training from scratch.", stacklevel=2)
@@ -75,8 +77,18 @@ class GroupedBatchNorm2d(nn.BatchNorm2d):
         out = []
         for i, chunk in enumerate(x.chunk(self.groups)):
             track = i < self.tracked
-            out.append(F.batch_norm(chunk, self.running_mean if track else None, self.running_var if track else None,
-                                    self.weight, self.bias, True, self.momentum, self.eps))
+            out.append(
+                F.batch_norm(
+                    chunk,
+                    self.running_mean if track else None,
+                    self.running_var if track else None,
+                    self.weight,
+                    self.bias,
+                    True,
+                    self.momentum,
+                    self.eps,
+                )
+            )
         self.num_batches_tracked.add_(self.tracked)
         return torch.cat(out)
 
@@ -90,8 +102,13 @@ class ResnetEncoder(nn.Module):
     equal images gives the pretrained response. ``norm_layer`` replaces BatchNorm2d (same keys).
     """
 
-    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, num_input_images: int = 1,
-                 norm_layer: type[nn.BatchNorm2d] = nn.BatchNorm2d):
+    def __init__(
+        self,
+        num_layers: int = 18,
+        imagenet: dict | None = None,
+        num_input_images: int = 1,
+        norm_layer: type[nn.BatchNorm2d] = nn.BatchNorm2d,
+    ):
         super().__init__()
         if num_layers not in _RESNETS:
             raise PoseconsError(f"num_layers must be one of {sorted(_RESNETS)}, got {num_layers}")
@@ -115,7 +132,8 @@ class ResnetEncoder(nn.Module):
         if h % 32 or w % 32:
             raise PoseconsError(
                 f"image size {h}×{w} is not a multiple of 32: resize to e.g. "
-                f"{max(32, round(h / 32) * 32)}×{max(32, round(w / 32) * 32)} (height×width)")
+                f"{max(32, round(h / 32) * 32)}×{max(32, round(w / 32) * 32)} (height×width)"
+            )
         n = self.net
         x = n.relu(n.bn1(n.conv1((images - 0.45) / 0.225)))
         feats = [x]
@@ -175,9 +193,12 @@ class PoseDecoder(nn.Module):
     def __init__(self, num_ch_in: int):
         super().__init__()
         self.net = nn.Sequential(
-            nn.Conv2d(num_ch_in, 256, 1), nn.ReLU(inplace=True),
-            nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(inplace=True),
-            nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(inplace=True),
+            nn.Conv2d(num_ch_in, 256, 1),
+            nn.ReLU(inplace=True),
+            nn.Conv2d(256, 256, 3, padding=1),
+            nn.ReLU(inplace=True),
+            nn.Conv2d(256, 256, 3, padding=1),
+            nn.ReLU(inplace=True),
             nn.Conv2d(256, 6, 1),
         )
 
@@ -206,8 +227,9 @@ class PoseNet(nn.Module):
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, norm_layer=GroupedBatchNorm2d)
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
-    def forward(self, image_a: torch.Tensor, image_b: torch.Tensor, groups: int = 1,
-                tracked: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, image_a: torch.Tensor, image_b: torch.Tensor, groups: int = 1, tracked: int | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """In training, ``groups`` equal chunks of the batch get their own BatchNorm statistics and
         the first ``tracked`` (default all) update the running ones (see GroupedBatchNorm2d)."""
         if image_a.shape[0] % groups:

@@ -86,8 +86,9 @@ def plot_error_histogram(abs_rel: Sequence[float], path: str | Path, bins: int =
     return _save(fig, path)
 
 
-def plot_trajectory_topview(poses: np.ndarray, path: str | Path, gt: np.ndarray | None = None,
-                            label: str = "camera") -> Path:
+def plot_trajectory_topview(
+    poses: np.ndarray, path: str | Path, gt: np.ndarray | None = None, label: str = "camera"
+) -> Path:
     """Top view (x right, z forward) of (N, 4, 4) camera → world poses, over (N, 4, 4) ground truth
     (then in metres) when given."""
     fig, ax = plt.subplots(figsize=(6, 6))
@@ -130,8 +131,9 @@ def colorize(disparity: np.ndarray, cmap: str = COLORMAP) -> np.ndarray:
     return (matplotlib.colormaps[cmap](norm)[..., :3] * 255).astype(np.uint8)
 
 
-def plot_scale_drift(indices: np.ndarray, scales: np.ndarray, scale: float, calibration: np.ndarray,
-                     path: str | Path) -> Path:
+def plot_scale_drift(
+    indices: np.ndarray, scales: np.ndarray, scale: float, calibration: np.ndarray, path: str | Path
+) -> Path:
     """Per-frame GT scale (N,) against frame index (N,), the sequence scale as a line, calibration
     frames marked."""
     fig, ax = plt.subplots(figsize=(7, 3.5))

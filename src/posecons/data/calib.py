@@ -90,8 +90,9 @@ def raw_projection(date_dir: Path, cam: int = 2) -> tuple[np.ndarray, tuple[int,
     p_rect = calib_matrix(calib, f"P_rect_0{cam}", (3, 4), source)
     width, height = calib_matrix(calib, f"S_rect_0{cam}", (2,), source)
     if width < 1 or height < 1 or p_rect[0, 0] <= 0 or p_rect[1, 1] <= 0:
-        raise PoseconsError(f"{source}: S_rect_0{cam} ({width:g}×{height:g}) and the focal lengths of P_rect_0{cam} "
-                            f"must be positive")
+        raise PoseconsError(
+            f"{source}: S_rect_0{cam} ({width:g}×{height:g}) and the focal lengths of P_rect_0{cam} must be positive"
+        )
     return p_rect, (int(round(width)), int(round(height)))
 
 
@@ -127,8 +128,10 @@ def read_calib_intrinsics(path: str | Path) -> np.ndarray:
     for key, shape in PIXEL_K_KEYS.items():
         if key in calib:
             return calib_matrix(calib, key, shape, path)[:, :3].astype(np.float64)
-    raise PoseconsError(f"{path}: no 'K', 'P_rect_02' or 'P2' entry (expected a file with 'K: 9 numbers', "
-                        f"a KITTI calib_cam_to_cam.txt or an odometry calib.txt)")
+    raise PoseconsError(
+        f"{path}: no 'K', 'P_rect_02' or 'P2' entry (expected a file with 'K: 9 numbers', "
+        f"a KITTI calib_cam_to_cam.txt or an odometry calib.txt)"
+    )
 
 
 def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:

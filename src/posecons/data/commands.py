@@ -14,19 +14,26 @@ from ..errors import PoseconsError
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data commands to the CLI's sub-command parser."""
     p = subparsers.add_parser("synth", help="write a synthetic KITTI-like dataset (raw + odometry + splits)")
-    p.add_argument("--out", type=output_folder, required=True,
-                   help="output folder: new, empty, or an earlier synth output")
-    p.add_argument("--drives", type=positive_int, default=4,
-                   help="number of drives (the last max(1, N//4) are test drives)")
-    p.add_argument("--frames", type=positive_int, default=100,
-                   help="frames per drive (10 Hz, so 10 frames = 1 s of driving)")
+    p.add_argument(
+        "--out", type=output_folder, required=True, help="output folder: new, empty, or an earlier synth output"
+    )
+    p.add_argument(
+        "--drives", type=positive_int, default=4, help="number of drives (the last max(1, N//4) are test drives)"
+    )
+    p.add_argument(
+        "--frames", type=positive_int, default=100, help="frames per drive (10 Hz, so 10 frames = 1 s of driving)"
+    )
     p.add_argument("--seed", type=non_negative_int, default=0, help="random seed of scenes and motion")
     p.add_argument("--ext", choices=("png", "jpg"), default="png", help="image format of the raw tree")
     p.add_argument("--width", type=positive_int, default=1242, help="image width in pixels (KITTI: 1242)")
     p.add_argument("--height", type=positive_int, default=375, help="image height in pixels (KITTI: 375)")
     p.add_argument("--workers", type=positive_int, default=None, help="render processes (default: up to 2)")
-    p.add_argument("--neighbours", type=positive_int, default=1,
-                   help="training lines need frames ±N (for model.frame_ids [0, -N, N])")
+    p.add_argument(
+        "--neighbours",
+        type=positive_int,
+        default=1,
+        help="training lines need frames ±N (for model.frame_ids [0, -N, N])",
+    )
     p.set_defaults(func=_synth)
 
     p = subparsers.add_parser("export-gt", help="export the ground-truth depth of a split to .npz")
@@ -34,23 +41,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--split-file", type=Path, required=True, help="split file: <folder> <frame> <l|r> lines")
     p.add_argument("--out", type=output_file, required=True, help="output .npz")
     p.add_argument("--improved", action="store_true", help="use KITTI's improved ground-truth PNGs")
-    p.add_argument("--improved-root", type=Path, default=None,
-                   help="folder with <drive>/proj_depth/groundtruth/... (default: inside the raw tree)")
-    p.add_argument("--depth", choices=("velo_x", "camera_z"), default="velo_x",
-                   help="LiDAR depth value: forward x (Eigen protocol) or camera z")
+    p.add_argument(
+        "--improved-root",
+        type=Path,
+        default=None,
+        help="folder with <drive>/proj_depth/groundtruth/... (default: inside the raw tree)",
+    )
+    p.add_argument(
+        "--depth",
+        choices=("velo_x", "camera_z"),
+        default="velo_x",
+        help="LiDAR depth value: forward x (Eigen protocol) or camera z",
+    )
     p.set_defaults(func=_export_gt)
 
     p = subparsers.add_parser("prepare", help="turn videos or frame folders into a KITTI-raw-layout dataset")
     p.add_argument("--input", type=Path, nargs="+", required=True, help="video files and/or folders of frames")
     p.add_argument("--out", type=output_folder, required=True, help="output dataset folder (new or empty)")
     for name in ("fx", "fy", "cx", "cy"):
-        p.add_argument(f"--{name}", type=positive_float if name.startswith("f") else finite_float,
-                       help="intrinsics in pixels of the input frames")
+        p.add_argument(
+            f"--{name}",
+            type=positive_float if name.startswith("f") else finite_float,
+            help="intrinsics in pixels of the input frames",
+        )
     p.add_argument("--calib", type=Path, help="file with 'K: 9 numbers', 'P_rect_02:' or 'P2:' instead")
     p.add_argument("--width", type=positive_int, help="resize frames to this width in pixels (default: keep)")
     p.add_argument("--height", type=positive_int, help="resize frames to this height in pixels (default: keep)")
-    p.add_argument("--static-threshold", type=fraction, default=0.01,
-                   help="drop frames whose mean grey difference (0–1 scale) to the last kept one is below this")
+    p.add_argument(
+        "--static-threshold",
+        type=fraction,
+        default=0.01,
+        help="drop frames whose mean grey difference (0–1 scale) to the last kept one is below this",
+    )
     p.set_defaults(func=_prepare)
 
     p = subparsers.add_parser("build-split", help="build a Zhou-style train/val split from a KITTI raw tree")
@@ -68,12 +90,15 @@ def _synth(args: argparse.Namespace) -> int:
     from .splits import read_split
     from .synth import generate_synth
 
-    info = generate_synth(args.out, args.drives, args.frames, args.seed, args.ext, args.width, args.height, args.workers,
-                          args.neighbours)
+    info = generate_synth(
+        args.out, args.drives, args.frames, args.seed, args.ext, args.width, args.height, args.workers, args.neighbours
+    )
     lines = len(read_split(args.out / "splits" / "synth" / "train_files.txt"))
-    print(f"wrote {len(info['drives'])} drives × {args.frames} frames to {args.out} "
-          f"(test: {', '.join(info['test_drives'])}); {lines} training lines with frames ±{args.neighbours}: "
-          f"enough for train.batch_size ≤ {lines} and model.frame_ids within ±{args.neighbours}")
+    print(
+        f"wrote {len(info['drives'])} drives × {args.frames} frames to {args.out} "
+        f"(test: {', '.join(info['test_drives'])}); {lines} training lines with frames ±{args.neighbours}: "
+        f"enough for train.batch_size ≤ {lines} and model.frame_ids within ±{args.neighbours}"
+    )
     return 0
 
 
@@ -102,7 +127,9 @@ def _prepare(args: argparse.Namespace) -> int:
     else:
         raise PoseconsError("intrinsics needed: --fx --fy --cx --cy (pixels) or --calib FILE")
     info = prepare(args.input, args.out, k, args.width, args.height, args.static_threshold)
-    print(f"wrote {len(info['drives'])} drives ({sum(info['frames'])} frames; {info['train']} train / {info['val']} val lines) to {args.out}")
+    print(
+        f"wrote {len(info['drives'])} drives ({sum(info['frames'])} frames; {info['train']} train / {info['val']} val lines) to {args.out}"
+    )
     return 0
 
 

@@ -23,9 +23,11 @@ def split_files(config: Config, data_path: str | Path, split_dir: str | Path | N
         folder = BUNDLED / config.data.split
     train = folder / "train_files.txt"
     if not train.is_file():
-        raise PoseconsError(f"{train}: training split file not found (data.split={config.data.split!r}; bundled: "
-                            f"{', '.join(bundled_names())}; pass --split-dir or run `posecons synth` / "
-                            "`posecons prepare` to create one)")
+        raise PoseconsError(
+            f"{train}: training split file not found (data.split={config.data.split!r}; bundled: "
+            f"{', '.join(bundled_names())}; pass --split-dir or run `posecons synth` / "
+            "`posecons prepare` to create one)"
+        )
     val = folder / "val_files.txt"
     return train, val if val.is_file() else None
 
@@ -33,6 +35,17 @@ def split_files(config: Config, data_path: str | Path, split_dir: str | Path | N
 def build_dataset(config: Config, data_path: str | Path, split_file: Path, train: bool) -> FrameDataset:
     m, d = config.model, config.data
     cls = KittiOdometryDataset if d.dataset == "kitti_odom" else KittiRawDataset
-    return cls(data_path, split_file, m.height, m.width, frame_ids=m.frame_ids, img_ext=d.img_ext, train=train,
-               calib_intrinsics=d.calib_intrinsics, flip_prob=d.flip_prob, jitter_prob=d.jitter_prob,
-               seed=config.train.seed, skip_incomplete=d.skip_incomplete)
+    return cls(
+        data_path,
+        split_file,
+        m.height,
+        m.width,
+        frame_ids=m.frame_ids,
+        img_ext=d.img_ext,
+        train=train,
+        calib_intrinsics=d.calib_intrinsics,
+        flip_prob=d.flip_prob,
+        jitter_prob=d.jitter_prob,
+        seed=config.train.seed,
+        skip_incomplete=d.skip_incomplete,
+    )

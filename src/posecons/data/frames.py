@@ -88,12 +88,17 @@ class FrameDataset(Dataset):
                 complete.append(line)
             elif not self.skip_incomplete:
                 path = self.image_path(line, line.frame + missing[0])
-                raise PoseconsError(f"{line.where}: frame {line.frame}{missing[0]:+d} of '{line}' missing: {path} "
-                                    "(data.skip_incomplete=true drops such lines)")
+                raise PoseconsError(
+                    f"{line.where}: frame {line.frame}{missing[0]:+d} of '{line}' missing: {path} "
+                    "(data.skip_incomplete=true drops such lines)"
+                )
         if len(complete) < len(self.lines):
             source = self.lines[0].where.rsplit(":", 1)[0]
-            print(f"{source}: dropped {len(self.lines) - len(complete)} of {len(self.lines)} lines whose frames "
-                  f"{list(self.frame_ids)} do not all exist (data.skip_incomplete)", file=sys.stderr)
+            print(
+                f"{source}: dropped {len(self.lines) - len(complete)} of {len(self.lines)} lines whose frames "
+                f"{list(self.frame_ids)} do not all exist (data.skip_incomplete)",
+                file=sys.stderr,
+            )
             self.lines = complete
             if not complete:
                 raise PoseconsError(f"{source}: no line has all of its frames {list(self.frame_ids)}")
@@ -136,7 +141,9 @@ class FrameDataset(Dataset):
         else:
             flip, jitter = False, np.array(IDENTITY_JITTER, dtype=np.float32)
         like = self.reference_size(line)
-        frames = torch.stack([self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids])
+        frames = torch.stack(
+            [self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids]
+        )
         k = torch.from_numpy(self.intrinsics(line).astype(np.float32))
         return {
             "frames": frames,

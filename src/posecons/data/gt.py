@@ -89,7 +89,9 @@ def export_gt(
     arrays = {}
     for i, line in enumerate(lines):
         if improved:
-            arrays[f"{i:06d}"] = read_improved_gt(improved_gt_path(data_path, line.folder, line.frame, line.side, improved_root))
+            arrays[f"{i:06d}"] = read_improved_gt(
+                improved_gt_path(data_path, line.folder, line.frame, line.side, improved_root)
+            )
         else:
             arrays[f"{i:06d}"] = lidar_gt(data_path, line.folder, line.frame, line.side, depth)
     arrays["lines"] = np.array([str(line) for line in lines], dtype=np.str_)

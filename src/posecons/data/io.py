@@ -27,8 +27,10 @@ def load_rgb(path: Path, like: tuple[Path, tuple[int, int]] | None = None) -> Im
     try:
         with Image.open(path) as img:
             if like is not None and img.size != like[1]:
-                raise PoseconsError(f"{path}: image is {img.size[0]}×{img.size[1]} pixels but {like[0]} of the same "
-                                    f"drive and camera is {like[1][0]}×{like[1][1]}; a drive's frames share one size")
+                raise PoseconsError(
+                    f"{path}: image is {img.size[0]}×{img.size[1]} pixels but {like[0]} of the same "
+                    f"drive and camera is {like[1][0]}×{like[1][1]}; a drive's frames share one size"
+                )
             return img.convert("RGB")
     except OSError as exc:
         raise PoseconsError(f"{path}: unreadable image ({exc})") from exc

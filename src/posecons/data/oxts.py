@@ -120,7 +120,9 @@ def poses_to_oxts(poses: np.ndarray, rpy: np.ndarray, origin: tuple[float, float
     vel = _derivative(pos, fps)
     force = _derivative(vel, fps) + np.array([0.0, 0.0, GRAVITY])  # what an accelerometer measures
     rel = np.einsum("nji,njk->nik", rot[:-1], rot[1:])  # R_i^T R_{i+1}
-    omega = np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], -1) * fps / 2
+    omega = (
+        np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], -1) * fps / 2
+    )
     omega = np.concatenate([omega, omega[-1:]]) if len(omega) else np.zeros((len(poses), 3))
     to_heading = np.einsum("nji,njk->nik", heading, rot)  # body → level frame
     out = np.zeros((len(poses), len(OXTS_FIELDS)))

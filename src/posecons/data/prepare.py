@@ -89,7 +89,9 @@ def prepare(
                     continue
                 last = signature
                 size = (width or native[0], height or native[1])
-                (img if img.size == size else img.resize(size, Image.BILINEAR)).save(data / f"{kept:010d}.png", compress_level=1)
+                (img if img.size == size else img.resize(size, Image.BILINEAR)).save(
+                    data / f"{kept:010d}.png", compress_level=1
+                )
                 kept += 1
             if kept < 3:
                 raise PoseconsError(f"{source}: only {kept} moving frames (need at least 3)")
@@ -106,5 +108,9 @@ def prepare(
         n_val = int(round(len(lines) * val_fraction))
         write_split(tmp / "splits" / "custom" / "train_files.txt", lines[n_val:])
         write_split(tmp / "splits" / "custom" / "val_files.txt", lines[:n_val])
-    return {"drives": [f"{DATE}/{DATE}_drive_{i:04d}_sync" for i in range(len(counts))], "frames": counts,
-            "train": len(lines) - n_val, "val": n_val}
+    return {
+        "drives": [f"{DATE}/{DATE}_drive_{i:04d}_sync" for i in range(len(counts))],
+        "frames": counts,
+        "train": len(lines) - n_val,
+        "val": n_val,
+    }

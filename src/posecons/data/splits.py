@@ -44,7 +44,9 @@ def parse_split_lines(lines: Iterable[str], source: str = "<lines>") -> list[Spl
             continue
         where = f"{source}:{number}"
         if len(fields) != 3:
-            raise PoseconsError(f"{where}: expected '<folder> <frame> <l|r>', got {len(fields)} fields: {raw.strip()!r}")
+            raise PoseconsError(
+                f"{where}: expected '<folder> <frame> <l|r>', got {len(fields)} fields: {raw.strip()!r}"
+            )
         folder, frame, side = fields
         if not frame.isdigit():
             raise PoseconsError(f"{where}: frame {frame!r} is not a non-negative integer")
@@ -71,8 +73,10 @@ def find_split_file(path: str | Path) -> Path:
     bundled = bundled / "test_files.txt" if bundled.is_dir() else bundled
     if bundled.is_file():
         return bundled
-    raise PoseconsError(f"{path}: split file not found (nor a bundled split: {', '.join(bundled_names())}, "
-                        "e.g. eigen or odom/test_files_09.txt)")
+    raise PoseconsError(
+        f"{path}: split file not found (nor a bundled split: {', '.join(bundled_names())}, "
+        "e.g. eigen or odom/test_files_09.txt)"
+    )
 
 
 def read_split(source: SplitSource) -> list[SplitLine]:
@@ -138,7 +142,9 @@ def build_split(
                 if frame - 1 in frames and frame + 1 in frames and (drive, frame) not in static_frames:
                     lines.append(SplitLine(folder, frame, side))
     if not lines:
-        raise PoseconsError(f"{data_path}: no usable frames found (expected <date>/<drive>_sync/image_02/data/*{img_ext})")
+        raise PoseconsError(
+            f"{data_path}: no usable frames found (expected <date>/<drive>_sync/image_02/data/*{img_ext})"
+        )
     rng = random.Random(seed)
     rng.shuffle(lines)
     n_val = int(round(len(lines) * val_fraction))

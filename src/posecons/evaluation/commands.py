@@ -19,20 +19,34 @@ from ..metrics import depth, pose
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the evaluation sub-commands to the ``posecons`` parser."""
-    p = subparsers.add_parser("evaluate-depth", help="KITTI depth metrics (Eigen protocol) and scale consistency",
-                              description="Evaluate predicted disparities (or a model) against ground-truth depth.")
+    p = subparsers.add_parser(
+        "evaluate-depth",
+        help="KITTI depth metrics (Eigen protocol) and scale consistency",
+        description="Evaluate predicted disparities (or a model) against ground-truth depth.",
+    )
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--pred-disps", type=Path, metavar="P.npy",
-                     help="(N, h, w) float32 scaled disparities, split order")
+    src.add_argument(
+        "--pred-disps", type=Path, metavar="P.npy", help="(N, h, w) float32 scaled disparities, split order"
+    )
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
-    p.add_argument("--gt", type=Path, metavar="GT.npz", help="exported ground truth (required with --pred-disps; "
-                   "with --checkpoint it is exported on the fly when missing)")
+    p.add_argument(
+        "--gt",
+        type=Path,
+        metavar="GT.npz",
+        help="exported ground truth (required with --pred-disps; "
+        "with --checkpoint it is exported on the fly when missing)",
+    )
     p.add_argument("--data-path", type=Path, help="KITTI raw root (with --checkpoint)")
     p.add_argument("--split-file", type=Path, help="split lines; gives the sequences (default: the GT's lines)")
-    p.add_argument("--scaling", choices=depth.SCALINGS, default="frame",
-                   help="median scaling per frame, per sequence, or none")
-    p.add_argument("--gt-kind", choices=tuple(depth.CROP_FOR_GT_KIND), default="lidar",
-                   help="lidar: Garg crop, 1e-3 < gt < 80 m; improved: gt > 0, no crop")
+    p.add_argument(
+        "--scaling", choices=depth.SCALINGS, default="frame", help="median scaling per frame, per sequence, or none"
+    )
+    p.add_argument(
+        "--gt-kind",
+        choices=tuple(depth.CROP_FOR_GT_KIND),
+        default="lidar",
+        help="lidar: Garg crop, 1e-3 < gt < 80 m; improved: gt > 0, no crop",
+    )
     p.add_argument("--post-process", action="store_true", help="average with the flipped image's prediction")
     p.add_argument("--save-disps", type=output_file, metavar="OUT.npy", help="save the model's disparities")
     _add_model_options(p)
@@ -40,8 +54,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--plots", type=output_folder, metavar="DIR", help="write scale and error plots (PNG)")
     p.set_defaults(func=evaluate_depth_command)
 
-    p = subparsers.add_parser("evaluate-pose", help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
-                              description="Evaluate predicted ego-motion against KITTI odometry poses.")
+    p = subparsers.add_parser(
+        "evaluate-pose",
+        help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
+        description="Evaluate predicted ego-motion against KITTI odometry poses.",
+    )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--pred-poses", type=Path, metavar="P.txt", help="KITTI pose file, camera → world")
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
@@ -49,16 +66,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--data-path", type=Path, help="KITTI odometry root with sequences/ (with --checkpoint)")
     p.add_argument("--sequence", type=non_negative_int, help="odometry sequence, e.g. 09 (with --checkpoint)")
     p.add_argument("--times", type=Path, help="times.txt (seconds) for the TUM timestamps (default: frame / 10 Hz)")
-    p.add_argument("--const-velocity", choices=pose.CONST_VELOCITY_MODES, default="first",
-                   help="baseline: repeat the first GT step, or the previous GT step")
+    p.add_argument(
+        "--const-velocity",
+        choices=pose.CONST_VELOCITY_MODES,
+        default="first",
+        help="baseline: repeat the first GT step, or the previous GT step",
+    )
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
-    p.add_argument("--out-dir", type=output_folder, metavar="DIR",
-                   help="write trajectories (KITTI, TUM) and a top-view plot")
+    p.add_argument(
+        "--out-dir", type=output_folder, metavar="DIR", help="write trajectories (KITTI, TUM) and a top-view plot"
+    )
     p.set_defaults(func=evaluate_pose_command)
 
-    p = subparsers.add_parser("compare", help="Markdown table (paper's Table 1 layout) from depth JSONs",
-                              description="Compare depth evaluations; a run directory means <run>/eval/depth.json.")
+    p = subparsers.add_parser(
+        "compare",
+        help="Markdown table (paper's Table 1 layout) from depth JSONs",
+        description="Compare depth evaluations; a run directory means <run>/eval/depth.json.",
+    )
     p.add_argument("results", nargs="+", type=Path, metavar="RUN_OR_JSON")
     p.add_argument("--names", nargs="+", help="row names (default: run directory or file name)")
     p.add_argument("--out", type=output_file, metavar="FILE", help="also write the table to FILE")
@@ -67,8 +92,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=positive_int, default=8, help="images per forward pass (with --checkpoint)")
-    p.add_argument("--device", type=device_name, default=None,
-                   help="torch device (default: cuda if available, else cpu)")
+    p.add_argument(
+        "--device", type=device_name, default=None, help="torch device (default: cuda if available, else cpu)"
+    )
 
 
 def _require(args: argparse.Namespace, *names: str) -> None:
@@ -111,11 +137,12 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         raise PoseconsError(f"{args.split_file} has {len(split)} lines but {gt_path} has {len(gts)} frames")
     for line, stored in zip(split, read_split(gt_lines)):  # the same frames in the same order, not just as many
         if str(line) != str(stored):
-            raise PoseconsError(f"{line.where}: '{line}' does not match line '{stored}' that {gt_path} was "
-                                "exported for; pass the split file the ground truth was exported from")
+            raise PoseconsError(
+                f"{line.where}: '{line}' does not match line '{stored}' that {gt_path} was "
+                "exported for; pass the split file the ground truth was exported from"
+            )
     if args.checkpoint is not None:
-        disps = evaluate.model_disparities(_predictor(args), args.data_path, split, args.batch_size,
-                                           args.post_process)
+        disps = evaluate.model_disparities(_predictor(args), args.data_path, split, args.batch_size, args.post_process)
         pred_name = str(args.checkpoint)
         if args.save_disps:
             atomic_write(args.save_disps, lambda tmp: np.save(tmp, disps))
@@ -125,12 +152,15 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     result = evaluate.depth_result(disps, gts, split, args.scaling, args.gt_kind, pred_name, str(gt_path))
     if args.checkpoint is not None:
         result.update(checkpoint=describe_checkpoint(args.checkpoint))
-    result.update(ground_truth=str(args.gt or "exported on the fly"),
-                  post_process=bool(args.checkpoint and args.post_process))
+    result.update(
+        ground_truth=str(args.gt or "exported on the fly"), post_process=bool(args.checkpoint and args.post_process)
+    )
     print(compare.markdown_table([result], [Path(pred_name).stem], bold=False), end="")
-    print(f"{result['n_frames']} frames, scaling {result['scaling']}, {result['n_skipped']} skipped (no valid GT); "
-          f"scales: median {result['scale_median']:.3f}, std/median {result['scale_std_over_median']:.3f}, "
-          f"σ/μ pooled {result['scale_cv_pooled']:.3f}")
+    print(
+        f"{result['n_frames']} frames, scaling {result['scaling']}, {result['n_skipped']} skipped (no valid GT); "
+        f"scales: median {result['scale_median']:.3f}, std/median {result['scale_std_over_median']:.3f}, "
+        f"σ/μ pooled {result['scale_cv_pooled']:.3f}"
+    )
     if args.json:
         write_json(args.json, result)
     if args.plots:
@@ -153,8 +183,9 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         _require(args, "data_path", "sequence")
         paths = list_sequence_frames(args.data_path, args.sequence)
         if len(paths) != len(gt):
-            raise PoseconsError(f"{len(paths)} images in sequence {args.sequence} but "
-                                f"{len(gt)} poses in {args.gt_poses}")
+            raise PoseconsError(
+                f"{len(paths)} images in sequence {args.sequence} but {len(gt)} poses in {args.gt_poses}"
+            )
         steps = evaluate.model_steps(_predictor(args), paths, args.batch_size)
         estimate, source = pose.global_from_relative(steps), str(args.checkpoint)
         checkpoint = describe_checkpoint(args.checkpoint)
@@ -169,8 +200,10 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")
     for name, r in (("prediction", result), (f"const. velocity ({args.const_velocity})", result["const_velocity"])):
-        print(f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
-              f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m")
+        print(
+            f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
+            f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m"
+        )
     if args.json:
         write_json(args.json, result)
     if args.out_dir:

@@ -28,8 +28,9 @@ def load_result(path: str | Path) -> dict:
     path = Path(path)
     file = path / RUN_RESULT if path.is_dir() else path
     if not file.is_file():
-        raise PoseconsError(f"{file}: no such evaluation JSON" + (" (run directory without eval/depth.json)"
-                                                                    if path.is_dir() else ""))
+        raise PoseconsError(
+            f"{file}: no such evaluation JSON" + (" (run directory without eval/depth.json)" if path.is_dir() else "")
+        )
     try:
         result = json.loads(file.read_text())
     except json.JSONDecodeError as exc:
@@ -71,13 +72,18 @@ def markdown_table(results: Sequence[dict], names: Sequence[str], bold: bool = T
                 if row[col] != "–" and float(row[col]) == best:
                     row[col] = f"**{row[col]}**"
     lines = table1_header() + ["| " + " | ".join([name, *row]) + " |" for name, row in zip(names, cells)]
-    notes = [f"- {name}: {checkpoint_note(result['checkpoint'])}" for name, result in zip(names, results)
-             if "checkpoint" in result]
+    notes = [
+        f"- {name}: {checkpoint_note(result['checkpoint'])}"
+        for name, result in zip(names, results)
+        if "checkpoint" in result
+    ]
     return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
 
 
 def checkpoint_note(info: dict) -> str:
     """One line naming the evaluated weights and how they were chosen (``describe_checkpoint``)."""
     step = f", step {info['step']}" if info.get("step") is not None else ""
-    return (f"{Path(info['file']).name}{step}; selected by: {info['selected_by']}; "
-            f"initialisation: {info.get('initialisation', 'not recorded')}")
+    return (
+        f"{Path(info['file']).name}{step}; selected by: {info['selected_by']}; "
+        f"initialisation: {info.get('initialisation', 'not recorded')}"
+    )

@@ -21,8 +21,9 @@ from ..metrics.pose import align_trajectory, evaluate_pose
 from ..plots import plot_error_histogram, plot_scale_boxplot, plot_scale_over_time, plot_trajectory_topview
 
 
-def model_disparities(predictor: Predictor, data_path: str | Path, split: SplitSource, batch_size: int = 8,
-                      post_process: bool = False) -> np.ndarray:
+def model_disparities(
+    predictor: Predictor, data_path: str | Path, split: SplitSource, batch_size: int = 8, post_process: bool = False
+) -> np.ndarray:
     """(N, h, w) float32 scaled disparities at network size of each split line's KITTI raw image."""
     frames = frames_from_paths(split_image_paths(data_path, split))
     batches = predict_batches(predictor, frames, batch_size, post_process=post_process)
@@ -49,19 +50,38 @@ def load_pred_disps(path: Path) -> np.ndarray:
         raise PoseconsError(f"{path}: not a .npy array of numbers (damaged, or not written by numpy.save)") from None
 
 
-def depth_result(disps: np.ndarray, gts: Sequence[np.ndarray], lines: Sequence[SplitLine], scaling: str = "frame",
-                     gt_kind: str = "lidar", pred_name: str = "predictions", gt_name: str = "ground truth") -> dict:
+def depth_result(
+    disps: np.ndarray,
+    gts: Sequence[np.ndarray],
+    lines: Sequence[SplitLine],
+    scaling: str = "frame",
+    gt_kind: str = "lidar",
+    pred_name: str = "predictions",
+    gt_name: str = "ground truth",
+) -> dict:
     """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
     N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
     added."""
-    result = evaluate_depth(disps, gts, [s.folder for s in lines], scaling=scaling, crop=CROP_FOR_GT_KIND[gt_kind],
-                            pred_name=pred_name, gt_name=gt_name)
+    result = evaluate_depth(
+        disps,
+        gts,
+        [s.folder for s in lines],
+        scaling=scaling,
+        crop=CROP_FOR_GT_KIND[gt_kind],
+        pred_name=pred_name,
+        gt_name=gt_name,
+    )
     result.update(gt_kind=gt_kind, predictions=pred_name, skipped_lines=[str(lines[i]) for i in result["skipped"]])
     return result
 
 
-def pose_result(estimate: np.ndarray, gt: np.ndarray, const_velocity: str = "first",
-                    pred_name: str = "predictions", gt_name: str = "ground truth") -> dict:
+def pose_result(
+    estimate: np.ndarray,
+    gt: np.ndarray,
+    const_velocity: str = "first",
+    pred_name: str = "predictions",
+    gt_name: str = "ground truth",
+) -> dict:
     """:func:`~posecons.metrics.pose.evaluate_pose` of (N, 4, 4) camera → world poses, with provenance."""
     result = evaluate_pose(estimate, gt, const_velocity)
     result.update(predictions=pred_name, ground_truth=gt_name)
@@ -84,5 +104,3 @@ def write_trajectories(out_dir: Path, estimate: np.ndarray, gt: np.ndarray, time
     write_tum(out_dir / "gt_tum.txt", gt, times)
     aligned, _ = align_trajectory(estimate, gt)
     plot_trajectory_topview(aligned, out_dir / "trajectory.png", gt, "prediction (Sim(3)-aligned)")
-
-

@@ -7,8 +7,13 @@ without importing torch.
 
 import importlib
 
-_WHERE = {"PredictOptions": ".predict", "predict": ".predict", "Predictor": ".backend",
-          "load_predictor": ".backend", "export_model": ".export"}
+_WHERE = {
+    "PredictOptions": ".predict",
+    "predict": ".predict",
+    "Predictor": ".backend",
+    "load_predictor": ".backend",
+    "export_model": ".export",
+}
 
 __all__ = sorted(_WHERE)
 

@@ -73,8 +73,10 @@ class OnnxPredictor(Predictor):
             info = json.loads(info_path.read_text())
             self.height, self.width = int(info["height"]), int(info["width"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise PoseconsError(f"{info_path}: missing or unreadable export description ({exc}); "
-                                f"ONNX models are run from a `posecons export` directory") from exc
+            raise PoseconsError(
+                f"{info_path}: missing or unreadable export description ({exc}); "
+                f"ONNX models are run from a `posecons export` directory"
+            ) from exc
         providers = ["CPUExecutionProvider"]
         if device.startswith("cuda") and "CUDAExecutionProvider" in ort.get_available_providers():
             providers.insert(0, "CUDAExecutionProvider")
@@ -131,8 +133,9 @@ def post_process_disparity(disp: torch.Tensor, disp_flipped: torch.Tensor) -> to
     return left * disp_flipped + right * disp + (1.0 - left - right) * 0.5 * (disp + disp_flipped)
 
 
-def predict_batches(predictor: Predictor, frames: Iterable[Frame], batch_size: int, depth: bool = True,
-                    post_process: bool = False) -> Iterator[tuple[list[Frame], np.ndarray, torch.Tensor | None]]:
+def predict_batches(
+    predictor: Predictor, frames: Iterable[Frame], batch_size: int, depth: bool = True, post_process: bool = False
+) -> Iterator[tuple[list[Frame], np.ndarray, torch.Tensor | None]]:
     """Per batch of up to ``batch_size`` frames: (frames, network images (B, 3, h, w) float32 in [0, 1],
     scaled disparities (B, 1, h, w), or None with ``depth=False``).
 

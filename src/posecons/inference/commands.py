@@ -11,24 +11,42 @@ from .io import DEFAULT_FPS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("predict", help="depth, ego-motion and point clouds for images or a video",
-                              description="Depth for every frame (.npy, 16-bit PNG, colour PNG, side-by-side "
-                                          "MP4 for video), a trajectory (KITTI and TUM) and optional point "
-                                          "clouds. Outputs are staged inside OUT and moved into place at the end.")
-    p.add_argument("--checkpoint", required=True, type=Path,
-                   help="checkpoint (.pt / .safetensors), an export directory or its depth.onnx")
+    p = subparsers.add_parser(
+        "predict",
+        help="depth, ego-motion and point clouds for images or a video",
+        description="Depth for every frame (.npy, 16-bit PNG, colour PNG, side-by-side "
+        "MP4 for video), a trajectory (KITTI and TUM) and optional point "
+        "clouds. Outputs are staged inside OUT and moved into place at the end.",
+    )
+    p.add_argument(
+        "--checkpoint",
+        required=True,
+        type=Path,
+        help="checkpoint (.pt / .safetensors), an export directory or its depth.onnx",
+    )
     p.add_argument("--input", required=True, type=Path, help="an image, a folder of images or a video")
-    p.add_argument("--out", type=output_folder, default="predictions",
-                   help="output folder: new, empty, or an earlier predict output")
+    p.add_argument(
+        "--out",
+        type=output_folder,
+        default="predictions",
+        help="output folder: new, empty, or an earlier predict output",
+    )
     p.add_argument("--batch-size", type=positive_int, default=4, help="frames per forward pass")
     p.add_argument("--device", type=device_name, default="cpu", help="cpu, cuda or cuda:N")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--scale", type=positive_float, help="multiply every depth and translation by this factor")
-    group.add_argument("--calibrate-gt", metavar="DIR|NPZ",
-                       help="scale = median over the first frames of median(gt)/median(pred); a folder of 16-bit "
-                            "depth PNGs named like the frames, or an export-gt .npz")
-    group.add_argument("--camera-height", type=positive_float, metavar="METRES",
-                       help="scale from the camera's height above the ground plane fitted in the first frames")
+    group.add_argument(
+        "--calibrate-gt",
+        metavar="DIR|NPZ",
+        help="scale = median over the first frames of median(gt)/median(pred); a folder of 16-bit "
+        "depth PNGs named like the frames, or an export-gt .npz",
+    )
+    group.add_argument(
+        "--camera-height",
+        type=positive_float,
+        metavar="METRES",
+        help="scale from the camera's height above the ground plane fitted in the first frames",
+    )
     p.add_argument("--calibrate-frames", type=positive_int, default=10, metavar="N", help="frames used to calibrate")
     p.add_argument("--intrinsics", metavar="fx,fy,cx,cy", help="pixel intrinsics of the input images")
     p.add_argument("--calib", type=Path, help="KITTI calib_cam_to_cam.txt (P_rect_02) or odometry calib.txt (P2)")
@@ -37,16 +55,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--ascii-ply", action="store_true", help="ASCII instead of binary PLY")
     p.add_argument("--no-trajectory", action="store_true", help="skip the pose network")
     p.add_argument("--no-video", action="store_true", help="no side-by-side MP4 for video input")
-    p.add_argument("--fps", type=positive_float, default=DEFAULT_FPS,
-                   help="frame rate of image folders in Hz (timestamps)")
+    p.add_argument(
+        "--fps", type=positive_float, default=DEFAULT_FPS, help="frame rate of image folders in Hz (timestamps)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=predict_command)
 
     e = subparsers.add_parser("export", help="depth and pose networks to ONNX (verified) and safetensors")
     e.add_argument("--checkpoint", required=True, type=Path, help="checkpoint (.pt or .safetensors)")
     e.add_argument("--out", required=True, type=output_folder, help="output folder: new, empty, or an earlier export")
-    e.add_argument("--tolerance", type=non_negative_float, default=1e-4,
-                   help="largest accepted |ONNX Runtime − PyTorch| on sample inputs (disparity / pose units)")
+    e.add_argument(
+        "--tolerance",
+        type=non_negative_float,
+        default=1e-4,
+        help="largest accepted |ONNX Runtime − PyTorch| on sample inputs (disparity / pose units)",
+    )
     e.set_defaults(func=export_command)
 
 
@@ -58,11 +81,21 @@ def predict_command(args: argparse.Namespace) -> int:
     )
 
     options = PredictOptions(
-        batch_size=args.batch_size, scale=args.scale, calibrate_gt=args.calibrate_gt,
-        calibrate_frames=args.calibrate_frames, camera_height=args.camera_height, intrinsics=args.intrinsics,
-        calib=str(args.calib) if args.calib else None, pointcloud=args.pointcloud, every=args.every,
-        ascii_ply=args.ascii_ply, trajectory=not args.no_trajectory, video=not args.no_video, fps=args.fps,
-        progress=not args.quiet).check()
+        batch_size=args.batch_size,
+        scale=args.scale,
+        calibrate_gt=args.calibrate_gt,
+        calibrate_frames=args.calibrate_frames,
+        camera_height=args.camera_height,
+        intrinsics=args.intrinsics,
+        calib=str(args.calib) if args.calib else None,
+        pointcloud=args.pointcloud,
+        every=args.every,
+        ascii_ply=args.ascii_ply,
+        trajectory=not args.no_trajectory,
+        video=not args.no_video,
+        fps=args.fps,
+        progress=not args.quiet,
+    ).check()
     summary = predict(load_predictor(args.checkpoint, args.device), args.input, args.out, options)
     print(f"{summary['frames']} frames → {args.out} (scale {summary['scale']:.6g}, {summary['seconds']:.1f} s)")
     return 0

@@ -53,8 +53,16 @@ def _export(graph: nn.Module, inputs: tuple, path: Path, input_names: list[str],
     dynamic = {name: {0: "batch"} for name in input_names + output_names}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        torch.onnx.export(graph.eval(), inputs, str(path), dynamo=False, opset_version=OPSET,
-                          input_names=input_names, output_names=output_names, dynamic_axes=dynamic)
+        torch.onnx.export(
+            graph.eval(),
+            inputs,
+            str(path),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=input_names,
+            output_names=output_names,
+            dynamic_axes=dynamic,
+        )
     graph.eval()  # the exporter restores the wrapper's original mode on its children
 
 
@@ -86,19 +94,32 @@ def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-
     with output_dir(out) as tmp:
         _export(depth, (sample[0, :1],), tmp / DEPTH_ONNX, ["images"], ["disparity"])
         _export(pose, (sample[1, :1], sample[2, :1]), tmp / POSE_ONNX, ["image_a", "image_b"], ["pose", "matrix"])
-        diffs = {"depth": _max_diff(depth, tmp / DEPTH_ONNX, {"images": sample[0]}),
-                 "pose": _max_diff(pose, tmp / POSE_ONNX, {"image_a": sample[1], "image_b": sample[2]})}
+        diffs = {
+            "depth": _max_diff(depth, tmp / DEPTH_ONNX, {"images": sample[0]}),
+            "pose": _max_diff(pose, tmp / POSE_ONNX, {"image_a": sample[1], "image_b": sample[2]}),
+        }
         worst = max(v for d in diffs.values() for v in d.values())
         if not worst <= tolerance:  # also catches NaN
-            raise PoseconsError(f"{checkpoint}: ONNX Runtime differs from PyTorch by {worst:.3g} "
-                                f"(tolerance {tolerance:g}): {diffs}")
+            raise PoseconsError(
+                f"{checkpoint}: ONNX Runtime differs from PyTorch by {worst:.3g} (tolerance {tolerance:g}): {diffs}"
+            )
         save_safetensors(tmp / WEIGHTS, model, config)
-        info = {"checkpoint": str(checkpoint), "height": h, "width": w, "min_depth": config.model.min_depth,
-                "max_depth": config.model.max_depth, "opset": OPSET, "batch_verified": batch,
-                "tolerance": tolerance, "max_abs_diff": diffs,
-                "files": {"depth": DEPTH_ONNX, "pose": POSE_ONNX, "weights": WEIGHTS},
-                "outputs": {"depth": "disparity (B,1,H,W): scaled disparity, depth = 1/disparity",
-                            "pose": "pose (B,6) axis-angle+translation; matrix (B,4,4) T_{b<-a}"},
-                "config": config.to_dict()}
+        info = {
+            "checkpoint": str(checkpoint),
+            "height": h,
+            "width": w,
+            "min_depth": config.model.min_depth,
+            "max_depth": config.model.max_depth,
+            "opset": OPSET,
+            "batch_verified": batch,
+            "tolerance": tolerance,
+            "max_abs_diff": diffs,
+            "files": {"depth": DEPTH_ONNX, "pose": POSE_ONNX, "weights": WEIGHTS},
+            "outputs": {
+                "depth": "disparity (B,1,H,W): scaled disparity, depth = 1/disparity",
+                "pose": "pose (B,6) axis-angle+translation; matrix (B,4,4) T_{b<-a}",
+            },
+            "config": config.to_dict(),
+        }
         (tmp / EXPORT_INFO).write_text(json.dumps(info, indent=2))
     return info

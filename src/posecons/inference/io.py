@@ -69,9 +69,11 @@ class FrameSource:
             self.kind, self.images = "video", []
             self.video_fps, self.num_frames = self._probe_video()
         else:
-            raise PoseconsError(f"{self.path}: unsupported input type {self.path.suffix!r}; give an image "
-                                f"({', '.join(IMAGE_EXTENSIONS)}), a folder of images or a video "
-                                f"({', '.join(VIDEO_EXTENSIONS)})")
+            raise PoseconsError(
+                f"{self.path}: unsupported input type {self.path.suffix!r}; give an image "
+                f"({', '.join(IMAGE_EXTENSIONS)}), a folder of images or a video "
+                f"({', '.join(VIDEO_EXTENSIONS)})"
+            )
 
     @property
     def is_video(self) -> bool:
@@ -131,8 +133,9 @@ class SideBySideWriter:
 
         self.path = path
         self.container = av.open(str(path), mode="w")
-        self.stream = self.container.add_stream("libx264" if "libx264" in av.codecs_available else "mpeg4",
-                                                rate=Fraction(fps).limit_denominator(1001))
+        self.stream = self.container.add_stream(
+            "libx264" if "libx264" in av.codecs_available else "mpeg4", rate=Fraction(fps).limit_denominator(1001)
+        )
         self.stream.pix_fmt = "yuv420p"
         self.size: tuple[int, int] | None = None
 

@@ -26,10 +26,13 @@ def depth_to_points(depth: np.ndarray, image: np.ndarray, K: np.ndarray) -> tupl
 
 def write_ply(path: str | Path, points: np.ndarray, colors: np.ndarray, binary: bool = True) -> None:
     """Write (N, 3) float32 points with (N, 3) uint8 colours as a PLY (binary little-endian or ASCII)."""
-    header = ("ply\n" f"format {'binary_little_endian' if binary else 'ascii'} 1.0\n"
-              f"element vertex {len(points)}\n"
-              "property float x\nproperty float y\nproperty float z\n"
-              "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+    header = (
+        "ply\n"
+        f"format {'binary_little_endian' if binary else 'ascii'} 1.0\n"
+        f"element vertex {len(points)}\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n"
+    )
     with open(path, "wb") as f:
         f.write(header.encode("ascii"))
         if binary:

@@ -80,8 +80,9 @@ def full_size_depth(disparity: torch.Tensor, height: int, width: int) -> np.ndar
     return 1.0 / resize_disparity(disparity[0].float().cpu().numpy(), height, width)
 
 
-def calibrate(source: FrameSource, predictor: Predictor, options: PredictOptions, K_norm: np.ndarray,
-              gt: GroundTruth | None) -> scaling.ScaleResult:
+def calibrate(
+    source: FrameSource, predictor: Predictor, options: PredictOptions, K_norm: np.ndarray, gt: GroundTruth | None
+) -> scaling.ScaleResult:
     """The sequence's scale from the first frames (see :class:`PredictOptions`)."""
     if options.scale is not None:
         return scaling.ScaleResult("given", float(options.scale))
@@ -105,8 +106,9 @@ def calibrate(source: FrameSource, predictor: Predictor, options: PredictOptions
         if len(names) == options.calibrate_frames:
             break
     if gt is not None:
-        return scaling.combine("ground_truth", names, scales, f"no frame of {source.path} has valid ground "
-                                                              f"truth in {gt.path}")
+        return scaling.combine(
+            "ground_truth", names, scales, f"no frame of {source.path} has valid ground truth in {gt.path}"
+        )
     return scaling.combine("camera_height", names, scales, "no ground plane found")
 
 
@@ -119,8 +121,7 @@ def _write_depth(out: Path, frame: Frame, depth: np.ndarray, disparity: np.ndarr
     return color
 
 
-def predict(predictor: Predictor, input: str | Path, out: str | Path,
-            options: PredictOptions | None = None) -> dict:
+def predict(predictor: Predictor, input: str | Path, out: str | Path, options: PredictOptions | None = None) -> dict:
     """Run ``predictor`` over ``input`` and write the outputs described in the module docstring.
 
     Returns the summary written to ``predict.json``.
@@ -153,8 +154,11 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
                     writer.write(frame.image, color)
                 if options.pointcloud and frame.index % options.every == 0:
                     K = normalised_to_pixel(K_norm, *frame.size)
-                    write_ply(tmp / "pointcloud" / f"{frame.name}.ply", *depth_to_points(depth, frame.image, K),
-                              binary=not options.ascii_ply)
+                    write_ply(
+                        tmp / "pointcloud" / f"{frame.name}.ply",
+                        *depth_to_points(depth, frame.image, K),
+                        binary=not options.ascii_ply,
+                    )
                 target = gt.get(frame.name, frame.index) if gt is not None else None
                 if target is not None:
                     drift.append((frame.index, frame.name, frame_scale(target, disp[0].cpu().numpy())))
@@ -178,14 +182,22 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path,
         scale_info = result.to_dict()
         if drift:
             index, per_frame = np.array([d[0] for d in drift]), np.array([d[2] for d in drift])
-            scale_info["drift"] = {**drift_stats(per_frame, s),
-                                   "per_frame": {name: float(v) for _, name, v in drift}}
+            scale_info["drift"] = {**drift_stats(per_frame, s), "per_frame": {name: float(v) for _, name, v in drift}}
             plot_scale_drift(index, per_frame, s, index[: len(result.frames)], tmp / "scale_drift.png")
             outputs.append("scale_drift.png")
         (tmp / "scale.json").write_text(json.dumps(scale_info, indent=2))
-        summary = {"input": str(source.path), "input_kind": source.kind, "model": predictor.name,
-                   "network_size": [predictor.height, predictor.width], "frames": count, "fps": fps,
-                   "scale": s, "intrinsics_normalised": K_norm.tolist(), "seconds": time.perf_counter() - start,
-                   "outputs": outputs + ["scale.json", "predict.json"], "options": asdict(options)}
+        summary = {
+            "input": str(source.path),
+            "input_kind": source.kind,
+            "model": predictor.name,
+            "network_size": [predictor.height, predictor.width],
+            "frames": count,
+            "fps": fps,
+            "scale": s,
+            "intrinsics_normalised": K_norm.tolist(),
+            "seconds": time.perf_counter() - start,
+            "outputs": outputs + ["scale.json", "predict.json"],
+            "options": asdict(options),
+        }
         (tmp / "predict.json").write_text(json.dumps(summary, indent=2))
     return summary

@@ -75,8 +75,7 @@ class ScaleResult:
     per_frame: list[float] = field(default_factory=list)  # their individual scales
 
     def to_dict(self) -> dict:
-        return {"method": self.method, "value": self.value, "frames_used": self.frames,
-                "frame_scales": self.per_frame}
+        return {"method": self.method, "value": self.value, "frames_used": self.frames, "frame_scales": self.per_frame}
 
 
 def combine(method: str, names: list[str], scales: list[float], what: str) -> ScaleResult:

@@ -96,9 +96,14 @@ def drift_stats(scales: np.ndarray, scale: float) -> dict:
     scales = scales[np.isfinite(scales)]
     if scales.size == 0:
         return {}
-    return {"frames": int(scales.size), "cv": float(scales.std() / scales.mean()),
-            "max_rel_deviation": float(np.abs(scales / scale - 1).max()),
-            "mean": float(scales.mean()), "min": float(scales.min()), "max": float(scales.max())}
+    return {
+        "frames": int(scales.size),
+        "cv": float(scales.std() / scales.mean()),
+        "max_rel_deviation": float(np.abs(scales / scale - 1).max()),
+        "mean": float(scales.mean()),
+        "min": float(scales.min()),
+        "max": float(scales.max()),
+    }
 
 
 def check_disparities(disps: np.ndarray, name: str = "predictions") -> np.ndarray:
@@ -137,8 +142,11 @@ def scale_consistency(scales: Sequence[float], sequences: Sequence[str]) -> dict
     for name in dict.fromkeys(sequences):
         s = scales[ok & (np.asarray(sequences) == name)]
         if s.size:
-            per_sequence[name] = {"n": int(s.size), "scale_mean": float(s.mean()),
-                                  "scale_cv": float(s.std() / s.mean())}
+            per_sequence[name] = {
+                "n": int(s.size),
+                "scale_mean": float(s.mean()),
+                "scale_cv": float(s.std() / s.mean()),
+            }
     pooled = scales[ok]
     return {
         "scale_cv": float(np.mean([v["scale_cv"] for v in per_sequence.values()])),

@@ -53,12 +53,15 @@ def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
     # Off-diagonal sums/differences: 4·q_i·q_j for the pairs (x,y), (x,z), (y,z), (w,x), (w,y), (w,z).
     xy, xz, yz = R[:, 0, 1] + R[:, 1, 0], R[:, 0, 2] + R[:, 2, 0], R[:, 1, 2] + R[:, 2, 1]
     wx, wy, wz = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
-    products = np.stack([  # row k: 4·q_k·(x, y, z, w)
-        np.stack([sq[:, 0], xy, xz, wx], 1),
-        np.stack([xy, sq[:, 1], yz, wy], 1),
-        np.stack([xz, yz, sq[:, 2], wz], 1),
-        np.stack([wx, wy, wz, sq[:, 3]], 1),
-    ], 1)
+    products = np.stack(
+        [  # row k: 4·q_k·(x, y, z, w)
+            np.stack([sq[:, 0], xy, xz, wx], 1),
+            np.stack([xy, sq[:, 1], yz, wy], 1),
+            np.stack([xz, yz, sq[:, 2], wz], 1),
+            np.stack([wx, wy, wz, sq[:, 3]], 1),
+        ],
+        1,
+    )
     pivot = np.argmax(sq, axis=1)
     q = products[np.arange(len(R)), pivot]
     q /= np.linalg.norm(q, axis=1, keepdims=True)
@@ -68,11 +71,14 @@ def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
 def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
     """(N, 4) quaternions (x, y, z, w), normalised here → (N, 3, 3) rotations."""
     x, y, z, w = (np.asarray(q, dtype=np.float64) / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], 1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], 1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], 1),
-    ], 1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], 1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], 1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], 1),
+        ],
+        1,
+    )
 
 
 def rotation_angle(R: np.ndarray) -> np.ndarray:

@@ -14,31 +14,49 @@ from ..errors import PoseconsError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("train", help="train depth and pose networks from a preset",
-                              description="Train a run. Multi-GPU on one node: --devices N (torchrun is started "
-                                          "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node.")
+    p = subparsers.add_parser(
+        "train",
+        help="train depth and pose networks from a preset",
+        description="Train a run. Multi-GPU on one node: --devices N (torchrun is started "
+        "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node.",
+    )
     p.add_argument("--config", help="preset file or bundled name (e.g. kitti/cycle); default on --resume: the run's")
     p.add_argument("--data-path", required=True, help="dataset root (KITTI raw layout, or odometry root)")
     p.add_argument("--out", type=output_folder, required=True, help="run directory")
     p.add_argument("--split-dir", help="folder with train_files.txt/val_files.txt (default DATA/splits/<data.split>)")
-    p.add_argument("--max-steps", type=non_negative_int,
-                   help="stop after this many optimiser steps (default: train.max_steps)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a config value, e.g. --set loss.constraints=[cyc] (repeatable)")
+    p.add_argument(
+        "--max-steps", type=non_negative_int, help="stop after this many optimiser steps (default: train.max_steps)"
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value, e.g. --set loss.constraints=[cyc] (repeatable)",
+    )
     p.add_argument("--resume", action="store_true", help="continue RUN/checkpoints/last.pt exactly")
     p.add_argument("--devices", type=positive_int, default=1, help="processes (one GPU each) per node")
     p.add_argument("--nodes", type=positive_int, default=1, help="machines taking part; each runs this command")
     p.add_argument("--rdzv-endpoint", help="HOST:PORT of the rendezvous for --nodes > 1")
-    p.add_argument("--accelerator", choices=("auto", "cpu", "cuda"), default="auto",
-                   help="auto: CUDA when a GPU is visible, else the CPU")
-    p.add_argument("--precision", choices=("32", "bf16", "16"),
-                   help="mixed precision: bf16 (GPU or CPU) or 16 (GPU) (default: train.precision)")
+    p.add_argument(
+        "--accelerator",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="auto: CUDA when a GPU is visible, else the CPU",
+    )
+    p.add_argument(
+        "--precision",
+        choices=("32", "bf16", "16"),
+        help="mixed precision: bf16 (GPU or CPU) or 16 (GPU) (default: train.precision)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=train_command)
 
     d = subparsers.add_parser("demo", help="synthetic data → train on the CPU → evaluate → report with plots")
-    d.add_argument("--out", type=output_folder, default="runs/demo",
-                   help="folder for data, run, evaluation and report.md")
+    d.add_argument(
+        "--out", type=output_folder, default="runs/demo", help="folder for data, run, evaluation and report.md"
+    )
     d.add_argument("--seed", type=non_negative_int, default=0, help="seed of the synthetic data and of training")
     d.set_defaults(func=demo_command)
 
@@ -87,6 +105,8 @@ def demo_command(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
     summary = run_demo(Path(args.out), seed=args.seed)
-    print(f"report: {Path(args.out) / 'report.md'}  abs_rel {summary['abs_rel']:.3f} "
-          f"(untrained {summary['abs_rel_untrained']:.3f}), σ/μ {summary['scale_cv']:.3f}")
+    print(
+        f"report: {Path(args.out) / 'report.md'}  abs_rel {summary['abs_rel']:.3f} "
+        f"(untrained {summary['abs_rel_untrained']:.3f}), σ/μ {summary['scale_cv']:.3f}"
+    )
     return 0

@@ -105,14 +105,22 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
 
     print("[5/5] writing the report", flush=True)
     summary = {
-        "abs_rel": depth["abs_rel"], "abs_rel_untrained": before["abs_rel"],
+        "abs_rel": depth["abs_rel"],
+        "abs_rel_untrained": before["abs_rel"],
         "abs_rel_improvement": 1 - depth["abs_rel"] / before["abs_rel"],
-        "sq_rel": depth["sq_rel"], "rmse": depth["rmse"], "a1": depth["a1"],
-        "scale_cv": depth["scale_cv"], "scale_cv_untrained": before["scale_cv"],
-        "ate_mean": pose["ate_mean"], "ate_std": pose["ate_std"], "ate_full_rmse": pose["ate_full_rmse"],
+        "sq_rel": depth["sq_rel"],
+        "rmse": depth["rmse"],
+        "a1": depth["a1"],
+        "scale_cv": depth["scale_cv"],
+        "scale_cv_untrained": before["scale_cv"],
+        "ate_mean": pose["ate_mean"],
+        "ate_std": pose["ate_std"],
+        "ate_full_rmse": pose["ate_full_rmse"],
         "ate_mean_const_velocity": pose["const_velocity"]["ate_mean"],
         "ate_full_rmse_const_velocity": pose["const_velocity"]["ate_full_rmse"],
-        "checkpoint": weights, "train_minutes": train_minutes, "minutes": (time.time() - start) / 60,
+        "checkpoint": weights,
+        "train_minutes": train_minutes,
+        "minutes": (time.time() - start) / 60,
         "config": config.to_dict(),
     }
     write_json(out / "summary.json", summary)
@@ -126,13 +134,14 @@ def _report(s: dict, depth: dict, before: dict, pose: dict, seq: str, meta: dict
     rows = "\n".join(
         f"| {name} | {r['scale_cv']:.4f} | {r['abs_rel']:.3f} | {r['sq_rel']:.3f} | {r['rmse']:.3f} | "
         f"{r['rmse_log']:.3f} | {r['a1']:.3f} | {r['a2']:.3f} | {r['a3']:.3f} |"
-        for name, r in (("untrained", before), ("trained (cyc)", depth)))
+        for name, r in (("untrained", before), ("trained (cyc)", depth))
+    )
     return f"""# posecons demo report
 
-Synthetic KITTI-format data (seed {meta.get('seed')}, {len(meta.get('drives', []))} drives), ResNet-{m['num_layers']}
-at {m['width']}×{m['height']}, batch {t['batch_size']}, lr {t['lr']}, {t['max_steps']} steps with the **cycle**
-constraint, trained on the CPU in {s['train_minutes']:.1f} min (whole demo {s['minutes']:.1f} min).
-Evaluated: {checkpoint_note(s['checkpoint'])}.
+Synthetic KITTI-format data (seed {meta.get("seed")}, {len(meta.get("drives", []))} drives), ResNet-{m["num_layers"]}
+at {m["width"]}×{m["height"]}, batch {t["batch_size"]}, lr {t["lr"]}, {t["max_steps"]} steps with the **cycle**
+constraint, trained on the CPU in {s["train_minutes"]:.1f} min (whole demo {s["minutes"]:.1f} min).
+Evaluated: {checkpoint_note(s["checkpoint"])}.
 Test: the held-out drives' `test_files.txt`, LiDAR ground truth, Garg crop, per-frame median scaling.
 
 ## Depth (paper Table 1 layout)
@@ -141,14 +150,14 @@ Test: the held-out drives' `test_files.txt`, LiDAR ground truth, Garg crop, per-
 |---|---|---|---|---|---|---|---|---|
 {rows}
 
-abs rel falls by **{100 * s['abs_rel_improvement']:.0f} %** from the untrained network.
+abs rel falls by **{100 * s["abs_rel_improvement"]:.0f} %** from the untrained network.
 
 ![validation](plots/validation.png)
 
 ### Scale consistency
 
-Per-frame scales median(gt)/median(pred): σ/μ per sequence averaged = {depth['scale_cv']:.4f}
-(pooled {depth['scale_cv_pooled']:.4f}; std/median {depth['scale_std_over_median']:.4f}).
+Per-frame scales median(gt)/median(pred): σ/μ per sequence averaged = {depth["scale_cv"]:.4f}
+(pooled {depth["scale_cv_pooled"]:.4f}; std/median {depth["scale_std_over_median"]:.4f}).
 
 ![scales](plots/scale_boxplot.png) ![scale over time](plots/scale_over_time.png)
 
@@ -158,8 +167,8 @@ Per-frame scales median(gt)/median(pred): σ/μ per sequence averaged = {depth['
 
 | | 5-frame snippet ATE | full ATE (Sim(3)) | RPE trans % | RPE rot deg/m |
 |---|---|---|---|---|
-| pose net | {pose['ate_mean']:.4f} ± {pose['ate_std']:.4f} | {pose['ate_full_rmse']:.3f} | {pose['rpe_trans']:.2f} | {pose['rpe_rot']:.4f} |
-| constant velocity (no images) | {cv['ate_mean']:.4f} ± {cv['ate_std']:.4f} | {cv['ate_full_rmse']:.3f} | {cv['rpe_trans']:.2f} | {cv['rpe_rot']:.4f} |
+| pose net | {pose["ate_mean"]:.4f} ± {pose["ate_std"]:.4f} | {pose["ate_full_rmse"]:.3f} | {pose["rpe_trans"]:.2f} | {pose["rpe_rot"]:.4f} |
+| constant velocity (no images) | {cv["ate_mean"]:.4f} ± {cv["ate_std"]:.4f} | {cv["ate_full_rmse"]:.3f} | {cv["rpe_trans"]:.2f} | {cv["rpe_rot"]:.4f} |
 
 The snippet ATE is nearly blind on smooth driving: compare it with the constant-velocity row.
 

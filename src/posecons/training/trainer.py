@@ -67,8 +67,9 @@ class Dist:
 
 def init_distributed(accelerator: str) -> tuple[Dist, torch.device]:
     """Join the process group torchrun describes (if any) and pick this process's device."""
-    env = Dist(int(os.environ.get("RANK", 0)), int(os.environ.get("WORLD_SIZE", 1)),
-               int(os.environ.get("LOCAL_RANK", 0)))
+    env = Dist(
+        int(os.environ.get("RANK", 0)), int(os.environ.get("WORLD_SIZE", 1)), int(os.environ.get("LOCAL_RANK", 0))
+    )
     use_cuda = accelerator == "cuda" or (accelerator == "auto" and torch.cuda.is_available())
     if use_cuda and not torch.cuda.is_available():
         raise PoseconsError("--accelerator cuda was asked for, but no CUDA device is visible")
@@ -104,8 +105,11 @@ class StopRequest:
         if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
             yield self
             return
-        previous = {s: signal.signal(s, self._handle) for s in (signal.SIGINT, signal.SIGTERM)
-                    if signal.getsignal(s) is not signal.SIG_IGN}  # e.g. SIGINT under nohup stays ignored
+        previous = {
+            s: signal.signal(s, self._handle)
+            for s in (signal.SIGINT, signal.SIGTERM)
+            if signal.getsignal(s) is not signal.SIG_IGN
+        }  # e.g. SIGINT under nohup stays ignored
         try:
             yield self
         finally:
@@ -126,8 +130,16 @@ def _prepare_run_dir(out: Path, resume: bool) -> None:
 
 
 class Trainer:
-    def __init__(self, config: Config, data_path: str | Path, out: str | Path, split_dir: str | Path | None = None,
-                 resume: bool = False, accelerator: str = "auto", quiet: bool = False):
+    def __init__(
+        self,
+        config: Config,
+        data_path: str | Path,
+        out: str | Path,
+        split_dir: str | Path | None = None,
+        resume: bool = False,
+        accelerator: str = "auto",
+        quiet: bool = False,
+    ):
         self.config, self.out = config, Path(out)
         t = config.train
         self.env, self.device = init_distributed(accelerator)
@@ -135,8 +147,10 @@ class Trainer:
             _prepare_run_dir(self.out, resume)
         self.quiet = quiet or not self.env.main
         if t.precision == "16" and self.device.type != "cuda":
-            raise PoseconsError("train.precision=16 (float16 with a gradient scaler) needs a GPU; "
-                                "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32")
+            raise PoseconsError(
+                "train.precision=16 (float16 with a gradient scaler) needs a GPU; "
+                "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32"
+            )
         if t.deterministic:
             use_deterministic_algorithms(self.device)
         self._seed_everything(t.seed + self.env.rank)
@@ -144,15 +158,22 @@ class Trainer:
         train_file, val_file = split_files(config, data_path, split_dir)
         self.train_set = build_dataset(config, data_path, train_file, train=True)
         if len(self.train_set) < t.batch_size * self.env.world:
-            raise PoseconsError(f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
-                                f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
-                                "more data (`posecons synth` prints how many training lines it wrote)")
+            raise PoseconsError(
+                f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
+                f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
+                "more data (`posecons synth` prints how many training lines it wrote)"
+            )
         # Validation (and its one-off ground-truth export) happens on the main rank only.
-        self.validator = (Validator(config, data_path, val_file, self.out, self.device)
-                          if val_file and t.val_every != "off" and self.env.main else None)
+        self.validator = (
+            Validator(config, data_path, val_file, self.out, self.device)
+            if val_file and t.val_every != "off" and self.env.main
+            else None
+        )
         if t.best_metric == "abs_rel" and self.validator is not None and self.validator.gt is None:
-            raise PoseconsError("train.best_metric=abs_rel selects best.pt by ground truth, but the validation split "
-                                f"{val_file} has no LiDAR scans; use train.best_metric=val_photometric")
+            raise PoseconsError(
+                "train.best_metric=abs_rel selects best.pt by ground truth, but the validation split "
+                f"{val_file} has no LiDAR scans; use train.best_metric=val_photometric"
+            )
 
         # A resumed run takes its weights from last.pt: nothing is downloaded, so it also resumes offline.
         model = PoseConsModel(_without_imagenet(config) if resume else config).to(self.device)
@@ -162,8 +183,11 @@ class Trainer:
         if t.sync_bn and self.env.world > 1:  # the pose net keeps its per-pair-group statistics
             model.depth_net = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model.depth_net)
         self.model = model
-        self.ddp = (DistributedDataParallel(model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
-                    if self.env.world > 1 else model)
+        self.ddp = (
+            DistributedDataParallel(model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
+            if self.env.world > 1
+            else model
+        )
         self.optimizer = torch.optim.Adam(model.parameters(), lr=t.lr)
         self.scheduler = torch.optim.lr_scheduler.MultiStepLR(self.optimizer, t.lr_decay_epochs, t.lr_decay)
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=t.precision == "16")
@@ -184,6 +208,7 @@ class Trainer:
         self.writer = None
         if self.env.main:
             from torch.utils.tensorboard import SummaryWriter
+
             self.writer = SummaryWriter(self.out / "tb")
 
     # ------------------------------------------------------------------ state
@@ -193,27 +218,45 @@ class Trainer:
 
     def state(self) -> dict[str, Any]:
         return {
-            "config": self.config.to_dict(), "model": self.model.state_dict(),
-            "optimizer": self.optimizer.state_dict(), "scheduler": self.scheduler.state_dict(),
-            "scaler": self.scaler.state_dict(), "step": self.step, "epoch": self.epoch,
-            "batch_in_epoch": self.batch_in_epoch, "bad_steps": self.bad_steps, "skipped_steps": self.skipped_steps,
-            "best": self.best, "initialisation": self.initialisation,
+            "config": self.config.to_dict(),
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "scaler": self.scaler.state_dict(),
+            "step": self.step,
+            "epoch": self.epoch,
+            "batch_in_epoch": self.batch_in_epoch,
+            "bad_steps": self.bad_steps,
+            "skipped_steps": self.skipped_steps,
+            "best": self.best,
+            "initialisation": self.initialisation,
             "train_seconds": self.seconds_before + time.time() - self.session_start,
-            "rng": {"torch": torch.get_rng_state(), "python": random.getstate(),
-                    "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else []},
+            "rng": {
+                "torch": torch.get_rng_state(),
+                "python": random.getstate(),
+                "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else [],
+            },
         }
 
     def _load(self, path: Path) -> None:
         state = load_checkpoint(path, map_location=self.device)
-        missing = [k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng")
-                   if k not in state]
+        missing = [
+            k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng") if k not in state
+        ]
         if missing:
-            raise PoseconsError(f"{path}: holds no training state ({', '.join(missing)} missing); --resume "
-                                "needs the checkpoints/last.pt that a run writes")
-        saved, requested = _without_imagenet(state["config"])["model"], _without_imagenet(self.config.to_dict())["model"]
+            raise PoseconsError(
+                f"{path}: holds no training state ({', '.join(missing)} missing); --resume "
+                "needs the checkpoints/last.pt that a run writes"
+            )
+        saved, requested = (
+            _without_imagenet(state["config"])["model"],
+            _without_imagenet(self.config.to_dict())["model"],
+        )
         if saved != requested:
-            raise PoseconsError(f"{path}: its model config {saved} differs from the requested "
-                                f"{requested}; resume with the run's own config.yaml")
+            raise PoseconsError(
+                f"{path}: its model config {saved} differs from the requested "
+                f"{requested}; resume with the run's own config.yaml"
+            )
         self.config.model.pretrained = state["config"]["model"]["pretrained"]
         self.initialisation = state.get("initialisation", "not recorded (checkpoint predates the record)")
         try:
@@ -242,10 +285,18 @@ class Trainer:
         """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
         ``selected_by`` says how a selected checkpoint (best.pt) was chosen."""
         if self.env.main:
-            save_checkpoint(self.out / "checkpoints" / name,
-                            {"config": self.config.to_dict(), "model": self.model.state_dict(),
-                             "step": self.step, "epoch": self.epoch, "best": self.best,
-                             "selected_by": selected_by, "initialisation": self.initialisation})
+            save_checkpoint(
+                self.out / "checkpoints" / name,
+                {
+                    "config": self.config.to_dict(),
+                    "model": self.model.state_dict(),
+                    "step": self.step,
+                    "epoch": self.epoch,
+                    "best": self.best,
+                    "selected_by": selected_by,
+                    "initialisation": self.initialisation,
+                },
+            )
 
     def _save_epoch(self) -> None:
         keep = self.config.train.keep_epochs
@@ -262,14 +313,22 @@ class Trainer:
         """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch)."""
         t = self.config.train
         self.train_set.set_epoch(epoch)
-        sampler = DistributedSampler(self.train_set, self.env.world, self.env.rank, shuffle=True,
-                                     seed=t.seed, drop_last=True)
+        sampler = DistributedSampler(
+            self.train_set, self.env.world, self.env.rank, shuffle=True, seed=t.seed, drop_last=True
+        )
         sampler.set_epoch(epoch)
-        indices = list(sampler)[skip_batches * t.batch_size:]
+        indices = list(sampler)[skip_batches * t.batch_size :]
         # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
-        return DataLoader(self.train_set, batch_size=t.batch_size, sampler=indices, drop_last=True,
-                          num_workers=self.config.data.num_workers, pin_memory=self.device.type == "cuda",
-                          persistent_workers=False, generator=torch.Generator().manual_seed(t.seed + epoch))
+        return DataLoader(
+            self.train_set,
+            batch_size=t.batch_size,
+            sampler=indices,
+            drop_last=True,
+            num_workers=self.config.data.num_workers,
+            pin_memory=self.device.type == "cuda",
+            persistent_workers=False,
+            generator=torch.Generator().manual_seed(t.seed + epoch),
+        )
 
     def _autocast(self):
         dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.config.train.precision)
@@ -305,10 +364,16 @@ class Trainer:
         if self._val_steps and self.step % self._val_steps:
             last_metrics = self.validate()
         seconds = time.time() - self.session_start
-        summary = {"steps": self.step, "epochs": self.epoch, "skipped_steps": self.skipped_steps,
-                   "minutes": (self.seconds_before + seconds) / 60, "minutes_this_session": seconds / 60,
-                   "initialisation": self.initialisation, "best_metric": self.config.train.best_metric,
-                   "last_validation": last_metrics}
+        summary = {
+            "steps": self.step,
+            "epochs": self.epoch,
+            "skipped_steps": self.skipped_steps,
+            "minutes": (self.seconds_before + seconds) / 60,
+            "minutes_this_session": seconds / 60,
+            "initialisation": self.initialisation,
+            "best_metric": self.config.train.best_metric,
+            "last_validation": last_metrics,
+        }
         if self.writer:
             self.writer.close()
         return summary
@@ -325,9 +390,11 @@ class Trainer:
     def _stop_now(self) -> None:
         self.save()
         name = signal.Signals(self.stop.signum).name
-        raise Interrupted(f"stopped by {name} at step {self.step}; the state is saved in "
-                          f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
-                          self.stop.signum)
+        raise Interrupted(
+            f"stopped by {name} at step {self.step}; the state is saved in "
+            f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
+            self.stop.signum,
+        )
 
     def _loop(self, total: int, bar) -> dict[str, Any]:
         """The epochs and steps from the current position to ``total``; returns the last validation."""
@@ -370,8 +437,9 @@ class Trainer:
         and the model outputs, which the image log reuses.
         """
         t = self.config.train
-        batch = jitter_batch({k: v.to(self.device, non_blocking=True) if torch.is_tensor(v) else v
-                              for k, v in batch.items()})
+        batch = jitter_batch(
+            {k: v.to(self.device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+        )
         sync = last or self.env.world == 1
         context = self.ddp.no_sync() if not sync and hasattr(self.ddp, "no_sync") else contextlib.nullcontext()
         with context:
@@ -398,9 +466,11 @@ class Trainer:
         self.skipped_steps += 1
         if self.bad_steps >= self.config.train.max_bad_steps:
             self.save()
-            raise PoseconsError(f"the loss was not finite for {self.bad_steps} steps in a row (step {self.step}); "
-                                f"the last good state is in {self.out / 'checkpoints' / 'last.pt'}. "
-                                "Try a lower train.lr or train.precision=32")
+            raise PoseconsError(
+                f"the loss was not finite for {self.bad_steps} steps in a row (step {self.step}); "
+                f"the last good state is in {self.out / 'checkpoints' / 'last.pt'}. "
+                "Try a lower train.lr or train.precision=32"
+            )
 
     def _log(self, losses: dict[str, float], batch: dict, outputs: dict) -> None:
         t = self.config.train
@@ -437,8 +507,10 @@ class Trainer:
 
 def describe_selection(best_metric: str) -> str:
     """How best.pt is chosen, in words for logs and reports."""
-    return {"val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
-            "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)"}[best_metric]
+    return {
+        "val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
+        "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)",
+    }[best_metric]
 
 
 def _without_imagenet(config):
@@ -460,6 +532,8 @@ def use_deterministic_algorithms(device: torch.device) -> None:
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
         torch.backends.cudnn.benchmark = False
     torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
+
+
 def _discard(out: Path, created: list[Path]) -> None:
     """Remove what a run that never saved a state wrote into its new or empty folder, and the folder
     and parents this call created."""
@@ -477,8 +551,15 @@ def _as_tuple(value):
     return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
 
 
-def train(config: Config, data_path: str | Path, out: str | Path, split_dir: str | Path | None = None,
-          resume: bool = False, accelerator: str = "auto", quiet: bool = False) -> dict[str, Any]:
+def train(
+    config: Config,
+    data_path: str | Path,
+    out: str | Path,
+    split_dir: str | Path | None = None,
+    resume: bool = False,
+    accelerator: str = "auto",
+    quiet: bool = False,
+) -> dict[str, Any]:
     """Train a run and return a summary (steps, minutes, last validation metrics)."""
     out = Path(out)
     main = int(os.environ.get("RANK", 0)) == 0

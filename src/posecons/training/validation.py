@@ -48,8 +48,12 @@ class Validator:
             return {}
         model.eval()
         m = self.config.model
-        loader = DataLoader(self.dataset, batch_size=self.config.train.batch_size, shuffle=False,
-                            num_workers=self.config.data.num_workers)
+        loader = DataLoader(
+            self.dataset,
+            batch_size=self.config.train.batch_size,
+            shuffle=False,
+            num_workers=self.config.data.num_workers,
+        )
         photometric, disps, folders = [], [], []
         for batch in loader:
             batch = {k: v.to(self.device) if torch.is_tensor(v) else v for k, v in batch.items()}
@@ -60,8 +64,23 @@ class Validator:
         metrics: dict[str, Any] = {"step": step, "val_photometric": sum(photometric) / len(self.indices)}
         if self.gt is not None:
             result = evaluate_depth(np.concatenate(disps), self.gt, folders)
-            metrics.update({k: result[k] for k in ("abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3",
-                                                   "scale_cv", "scale_cv_pooled", "n_frames")})
+            metrics.update(
+                {
+                    k: result[k]
+                    for k in (
+                        "abs_rel",
+                        "sq_rel",
+                        "rmse",
+                        "rmse_log",
+                        "a1",
+                        "a2",
+                        "a3",
+                        "scale_cv",
+                        "scale_cv_pooled",
+                        "n_frames",
+                    )
+                }
+            )
         write_json(self.out / "metrics" / f"step_{step:06d}.json", metrics)
         append_record(self.out / "metrics.jsonl", metrics)  # a resumed run replaces the rows it repeats
         return metrics

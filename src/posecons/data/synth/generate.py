@@ -106,7 +106,14 @@ _JOB: _Job | None = None
 def _render_frame(frame: int) -> None:
     job = _JOB
     for cam, raw_name, odo_name in ((2, "image_02", "image_2"), (3, "image_03", "image_3")):
-        rgb, _ = render_camera(job.drive.prims, job.shading, job.drive.camera_pose(job.rig, frame, cam), job.rig.k(cam), job.rig.width, job.rig.height)
+        rgb, _ = render_camera(
+            job.drive.prims,
+            job.shading,
+            job.drive.camera_pose(job.rig, frame, cam),
+            job.rig.k(cam),
+            job.rig.width,
+            job.rig.height,
+        )
         raw_path = job.drive_dir / raw_name / "data" / f"{frame:010d}.{job.ext}"
         raw_path.write_bytes(_encode(rgb, job.ext))
         odo_path = job.sequence_dir / odo_name / f"{frame:06d}.png"
@@ -126,7 +133,9 @@ def _link_or_copy(src: Path, dst: Path) -> None:
 
 
 def _timestamps(start: datetime, frames: int) -> str:
-    return "".join(f"{(start + timedelta(seconds=i / FPS)).strftime('%Y-%m-%d %H:%M:%S.%f')}000\n" for i in range(frames))
+    return "".join(
+        f"{(start + timedelta(seconds=i / FPS)).strftime('%Y-%m-%d %H:%M:%S.%f')}000\n" for i in range(frames)
+    )
 
 
 def _write_drive_metadata(drive: Drive, rig: Rig, drive_dir: Path, sequence: str, odometry: Path, index: int) -> None:
@@ -150,7 +159,7 @@ def _write_drive_metadata(drive: Drive, rig: Rig, drive_dir: Path, sequence: str
 def moving_frames(drive: Drive, rig: Rig, neighbours: int = 1) -> list[int]:
     """Frames n … N−1−n whose neighbours −n/+n exist and are at least STATIC_SPAN apart (non-static)."""
     centres = np.stack([drive.camera_pose(rig, i, 2)[:3, 3] for i in range(len(drive.trajectory.speed))])
-    span = np.linalg.norm(centres[2 * neighbours:] - centres[:-2 * neighbours], axis=1)
+    span = np.linalg.norm(centres[2 * neighbours :] - centres[: -2 * neighbours], axis=1)
     return [i + neighbours for i in np.nonzero(span >= STATIC_SPAN)[0]]
 
 
@@ -171,8 +180,10 @@ def generate_synth(
     with ``model.frame_ids: [0, -n, n]``.
     """
     if drives < 2 or frames < 2 * neighbours + 1 or neighbours < 1:
-        raise PoseconsError(f"synth needs at least 2 drives (one held out for testing) and {2 * neighbours + 1} "
-                            f"frames for ±{neighbours} neighbours, got {drives} × {frames}")
+        raise PoseconsError(
+            f"synth needs at least 2 drives (one held out for testing) and {2 * neighbours + 1} "
+            f"frames for ±{neighbours} neighbours, got {drives} × {frames}"
+        )
     if ext not in ("png", "jpg") or width < 16 or height < 16:
         raise PoseconsError(f"synth: unsupported --ext {ext!r} or size {width}x{height}")
     workers = workers or min(2, os.cpu_count() or 1)
@@ -197,7 +208,9 @@ def generate_synth(
                 (drive_dir / sub).mkdir(parents=True)
             for sub in ("image_2", "image_3"):
                 (seq_dir / sub).mkdir(parents=True)
-            _render_drive(_Job(drive, shading_tables(drive.prims, textures), rig, lidar, ext, drive_dir, seq_dir), frames, workers)
+            _render_drive(
+                _Job(drive, shading_tables(drive.prims, textures), rig, lidar, ext, drive_dir, seq_dir), frames, workers
+            )
             _write_drive_metadata(drive, rig, drive_dir, sequence, odometry, index)
             static[folder] = [int(i) for i in np.nonzero(drive.trajectory.speed == 0)[0]]
             if index in test_ids:
@@ -205,7 +218,9 @@ def generate_synth(
                 odom = [SplitLine(str(index), f, "l") for f in range(frames - 1)]
                 write_split(tmp / "splits" / "synth_odom" / f"test_files_{sequence}.txt", odom)
             else:
-                train_lines += [SplitLine(folder, f, "lr"[rng.integers(2)]) for f in moving_frames(drive, rig, neighbours)]
+                train_lines += [
+                    SplitLine(folder, f, "lr"[rng.integers(2)]) for f in moving_frames(drive, rig, neighbours)
+                ]
         rng.shuffle(train_lines)
         n_val = max(1, len(train_lines) // 10) if len(train_lines) > 1 else 0
         write_split(tmp / "splits" / "synth" / "train_files.txt", train_lines[n_val:])

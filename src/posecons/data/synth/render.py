@@ -41,7 +41,9 @@ def shading_tables(prims: list[Primitive], textures: list[np.ndarray]) -> Shadin
     )
 
 
-def cast(prims: list[Primitive], origin: np.ndarray, dirs: np.ndarray, rects: list[list[tuple]]) -> tuple[np.ndarray, np.ndarray]:
+def cast(
+    prims: list[Primitive], origin: np.ndarray, dirs: np.ndarray, rects: list[list[tuple]]
+) -> tuple[np.ndarray, np.ndarray]:
     """First hits of rays (3, R, C) from ``origin``: (t (R, C) float32, inf on a miss; primitive
     index (R, C), −1 on a miss). ``rects[i]`` lists (r0, r1, c0, c1) windows primitive i may hit."""
     t_best = np.full(dirs.shape[1:], INF, dtype=np.float32)
@@ -138,7 +140,9 @@ def shade(shading: Shading, dirs: np.ndarray, t: np.ndarray, hits, focal: float)
     return np.clip(rgb, 0.0, 1.0).reshape(*dirs.shape[1:], 3)
 
 
-def camera_rects(prims: list[Primitive], m_cam_world: np.ndarray, k: np.ndarray, width: int, height: int, far: float = 250.0):
+def camera_rects(
+    prims: list[Primitive], m_cam_world: np.ndarray, k: np.ndarray, width: int, height: int, far: float = 250.0
+):
     """Image windows each primitive may cover, from its bounding box clipped to z ≥ NEAR."""
     rects = []
     for prim in prims:
@@ -189,10 +193,14 @@ def _rotate(rotation: np.ndarray, rays: np.ndarray) -> np.ndarray:
     einsum rather than ``@``: OpenBLAS would spin a second thread per render worker for no gain
     (twice the CPU time at the same wall time).
     """
-    return np.einsum("ij,jn->in", rotation.astype(np.float32), rays.reshape(3, -1).astype(np.float32)).reshape(rays.shape)
+    return np.einsum("ij,jn->in", rotation.astype(np.float32), rays.reshape(3, -1).astype(np.float32)).reshape(
+        rays.shape
+    )
 
 
-def render_camera(prims, shading: Shading, t_world_cam: np.ndarray, k: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+def render_camera(
+    prims, shading: Shading, t_world_cam: np.ndarray, k: np.ndarray, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Render one pinhole view: (RGB uint8 (H, W, 3), camera depth z float32 (H, W), 0 on sky).
 
     t_world_cam: (4, 4) camera → world pose (camera x right, y down, z forward); k: (3, 3) pixels.
@@ -226,7 +234,13 @@ class Lidar:
         elevation = np.deg2rad(np.linspace(2.0, -24.8, self.beams))[:, None]
         n_az = int(round(360.0 / self.azimuth_step_deg))
         azimuth = -np.pi + (np.arange(n_az) + 0.5) * (2 * np.pi / n_az)
-        return np.stack(np.broadcast_arrays(np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation) + 0 * azimuth))
+        return np.stack(
+            np.broadcast_arrays(
+                np.cos(elevation) * np.cos(azimuth),
+                np.cos(elevation) * np.sin(azimuth),
+                np.sin(elevation) + 0 * azimuth,
+            )
+        )
 
     def windows(self, prims: list[Primitive], m_velo_world: np.ndarray, n_az: int) -> list[list[tuple]]:
         """Azimuth column windows each primitive may cover (all beams; two windows across ±180°)."""

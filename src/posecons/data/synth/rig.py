@@ -122,5 +122,7 @@ class Rig:
         for cam in range(4):
             entries[f"S_rect_0{cam}"] = [self.width, self.height]
             entries[f"P_rect_0{cam}"] = self.p_rect(cam).ravel().tolist()
-        order = ["corner_dist"] + [f"{k}_0{c}" for c in range(4) for k in ("S", "K", "D", "R", "T", "S_rect", "R_rect", "P_rect")]
+        order = ["corner_dist"] + [
+            f"{k}_0{c}" for c in range(4) for k in ("S", "K", "D", "R", "T", "S_rect", "R_rect", "P_rect")
+        ]
         return {key: entries[key] for key in order}

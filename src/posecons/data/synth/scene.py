@@ -35,7 +35,14 @@ MATERIALS = (
 )
 ASPHALT, SIDEWALK, FACADE, CAR, GLASS, POLE, TRUNK, FOLIAGE, PAINT = range(len(MATERIALS))
 FACADE_TINTS = ((1.0, 1.0, 1.0), (1.15, 0.8, 0.65), (0.9, 0.95, 1.05), (1.2, 1.1, 0.8), (0.75, 0.75, 0.78))
-CAR_TINTS = ((0.9, 0.1, 0.1), (0.15, 0.25, 0.7), (0.95, 0.95, 0.95), (0.2, 0.2, 0.22), (0.6, 0.6, 0.62), (0.2, 0.5, 0.3))
+CAR_TINTS = (
+    (0.9, 0.1, 0.1),
+    (0.15, 0.25, 0.7),
+    (0.95, 0.95, 0.95),
+    (0.2, 0.2, 0.22),
+    (0.6, 0.6, 0.62),
+    (0.2, 0.5, 0.3),
+)
 
 
 def make_textures(rng: np.random.Generator, count: int = 4) -> list[np.ndarray]:
@@ -94,7 +101,9 @@ def build_scene(rng: np.random.Generator, path_xy: np.ndarray, path_heading: np.
     def box(material, s, lateral, size, z0=0.0, tint=(1, 1, 1)):
         xy, psi = path.at(s, lateral)
         half = np.asarray(size, dtype=np.float64) / 2
-        prims.append(Box(material, np.asarray(tint, float), rng.uniform(0, 25, 2), np.array([*xy, z0 + half[2]]), half, psi))
+        prims.append(
+            Box(material, np.asarray(tint, float), rng.uniform(0, 25, 2), np.array([*xy, z0 + half[2]]), half, psi)
+        )
 
     for s in np.arange(rng.uniform(0, 9), length, 9.0):  # dashed centre line, 1.75 m left of the car
         box(PAINT, s, 1.75, (3.0, 0.15, 0.01))
