@@ -99,3 +99,23 @@ def test_bad_inputs_raise_value_error():
         ssim_dissimilarity(torch.zeros(1, 3, 4, 4, dtype=torch.uint8), torch.rand(1, 3, 4, 4))
     with pytest.raises(ValueError, match="axisangle"):
         identity_loss(torch.zeros(3, 3), torch.zeros(3, 1, 3))
+
+
+def test_ssim_matches_window_by_window_formula():
+    # SSIM from its definition, one 3×3 reflection-padded window at a time, in float64.
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    x, y = rng.random((2, 6, 7)), rng.random((2, 6, 7))
+    c1, c2 = 0.01**2, 0.03**2
+    px, py = np.pad(x, ((0, 0), (1, 1), (1, 1)), mode="reflect"), np.pad(y, ((0, 0), (1, 1), (1, 1)), mode="reflect")
+    expected = np.zeros_like(x)
+    for c, i, j in np.ndindex(*x.shape):
+        a, b = px[c, i : i + 3, j : j + 3], py[c, i : i + 3, j : j + 3]
+        cov = (a * b).mean() - a.mean() * b.mean()
+        ssim = ((2 * a.mean() * b.mean() + c1) * (2 * cov + c2)) / (
+            (a.mean() ** 2 + b.mean() ** 2 + c1) * (a.var() + b.var() + c2)
+        )
+        expected[c, i, j] = np.clip((1 - ssim) / 2, 0, 1)
+    out = ssim_dissimilarity(torch.from_numpy(x)[None], torch.from_numpy(y)[None])[0].numpy()
+    assert np.allclose(out, expected, atol=1e-12)
