@@ -10,8 +10,6 @@ Conventions, pinned by tests:
 
 from __future__ import annotations
 
-import functools
-
 import torch
 import torch.nn.functional as F
 
@@ -136,15 +134,11 @@ def flip_intrinsics(K_norm: torch.Tensor, width: int) -> torch.Tensor:
 
 
 def pixel_grid(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
-    """Homogeneous pixel coordinates (3, H·W): rows u, v, 1 (u along the width); made once per
-    size, dtype and device (read-only)."""
-    return _pixel_grid(height, width, like.dtype, like.device)
-
-
-@functools.lru_cache(maxsize=32)
-def _pixel_grid(height: int, width: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """Homogeneous pixel coordinates (3, H·W): rows u, v, 1 (u along the width)."""
     v, u = torch.meshgrid(
-        torch.arange(height, dtype=dtype, device=device), torch.arange(width, dtype=dtype, device=device), indexing="ij"
+        torch.arange(height, dtype=like.dtype, device=like.device),
+        torch.arange(width, dtype=like.dtype, device=like.device),
+        indexing="ij",
     )
     return torch.stack([u, v, torch.ones_like(u)]).view(3, -1)
 
@@ -185,20 +179,12 @@ def warp(source: torch.Tensor, depth: torch.Tensor, T: torch.Tensor, K: torch.Te
     at this resolution. Bilinear sampling with border padding.
     """
     check_tensor("source", source, (None, None, None, None))
-    if source.shape[-2:] != depth.shape[-2:]:
-        raise ValueError(
-            f"source: expected spatial size {tuple(depth.shape[-2:])} like depth, got {tuple(source.shape[-2:])}"
-        )
-    return sample_view(source, backproject(depth, K), T, K)
-
-
-def sample_view(source: torch.Tensor, points: torch.Tensor, T: torch.Tensor, K: torch.Tensor) -> torch.Tensor:
-    """The second half of :func:`warp`, for target points that several sources share: sample
-    ``source`` (B, C, H, W) where the target's camera points (B, 3, H·W), moved by T_{source←target}
-    (B, 4, 4), project through pixel K (B, 3, 3)."""
     check_tensor("T", T, (source.shape[0], 4, 4))
-    h, w = source.shape[-2:]
-    grid = pixels_to_grid(project(transform_points(T, points), K), h, w)
+    _, _, h, w = depth.shape
+    if source.shape[-2:] != (h, w):
+        raise ValueError(f"source: expected spatial size {(h, w)} like depth, got {tuple(source.shape[-2:])}")
+    pixels = project(transform_points(T, backproject(depth, K)), K)
+    grid = pixels_to_grid(pixels, h, w)
     return F.grid_sample(source, grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
@@ -215,7 +201,6 @@ __all__ = [
     "pose_distance",
     "pose_vec_to_mat",
     "project",
-    "sample_view",
     "scale_intrinsics",
     "transform_points",
     "warp",

@@ -17,7 +17,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .config import Config
-from .geometry import backproject, check_tensor, disp_to_depth, pose_vec_to_mat, sample_view, scale_intrinsics
+from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrinsics, warp
 from .losses import (
     cycle_loss,
     forward_backward_loss,
@@ -178,10 +178,9 @@ class PoseConsModel(nn.Module):
                 disp = F.interpolate(disp, size=size, mode="bilinear", align_corners=False)
             depth = disp_to_depth(disp, m.min_depth, m.max_depth)[1]
             K = scale_intrinsics(K_norm, *size)
-            points = backproject(depth, K)  # the target's camera points, shared by every source
             reproj = torch.cat(
                 [
-                    photometric_error(sample_view(src, points, poses[f], K), tgt, lo.ssim_weight)
+                    photometric_error(warp(src, depth, poses[f], K), tgt, lo.ssim_weight)
                     for f, src in zip(m.frame_ids[1:], srcs)
                 ],
                 1,
