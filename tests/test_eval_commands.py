@@ -84,39 +84,20 @@ def test_evaluate_depth_bad_input_names_the_file(depth_files, capsys):
     np.save(out / "nan.npy", nan)
     assert main(["evaluate-depth", "--pred-disps", str(out / "nan.npy"), "--gt", str(out / "gt.npz")]) == 2
     assert "nan.npy: 1 NaN/inf or non-positive" in capsys.readouterr().err
+
     # As many lines as the ground truth, but another frame: checked by content, not by count.
-    (out / "other.txt").write_text(f"{DRIVE} 1 l\n2011_09_26/2011_09_26_drive_0009_sync 6 l\n{DRIVE} 2 l\n")
-    assert (
-        main(
-            [
-                "evaluate-depth",
-                "--pred-disps",
-                str(out / "pred.npy"),
-                "--gt",
-                str(out / "gt.npz"),
-                "--split-file",
-                str(out / "other.txt"),
-            ]
-        )
-        == 2
-    )
+    def with_split(name: str, lines: str) -> int:
+        (out / name).write_text(lines)
+        args = ["--pred-disps", str(out / "pred.npy"), "--gt", str(out / "gt.npz"), "--split-file", str(out / name)]
+        return main(["evaluate-depth", *args])
+
+    assert with_split("other.txt", f"{DRIVE} 1 l\n2011_09_26/2011_09_26_drive_0009_sync 6 l\n{DRIVE} 2 l\n") == 2
     err = capsys.readouterr().err
     assert "other.txt:2: '2011_09_26/2011_09_26_drive_0009_sync 6 l' does not match" in err and "gt.npz" in err
-    (out / "same.txt").write_text(f"{DRIVE} 0000000001 l\n2011_09_26/2011_09_26_drive_0009_sync 5 l\n{DRIVE} 2 l\n")
+    # The padding of the frame number does not matter.
     assert (
-        main(
-            [
-                "evaluate-depth",
-                "--pred-disps",
-                str(out / "pred.npy"),
-                "--gt",
-                str(out / "gt.npz"),
-                "--split-file",
-                str(out / "same.txt"),
-            ]
-        )
-        == 0
-    )  # padding of the frame number does not matter
+        with_split("same.txt", f"{DRIVE} 0000000001 l\n2011_09_26/2011_09_26_drive_0009_sync 5 l\n{DRIVE} 2 l\n") == 0
+    )
 
 
 @pytest.fixture
