@@ -11,7 +11,9 @@ import torch
 from posecons.data.calib import raw_intrinsics, read_calib_file, velo_to_image
 from posecons.data.gt import improved_gt_path, lidar_gt, read_improved_gt, velo_to_depth_map
 from posecons.data.io import load_velodyne
+from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
+from posecons.errors import PoseconsError
 from posecons.data.oxts import oxts_to_poses, read_oxts
 from posecons.data.splits import read_split, read_static_frames, read_test_scenes
 from posecons.data.trajectory_io import read_kitti_poses
@@ -126,3 +128,16 @@ def test_real_raw_dataset(kitti_dir: Path) -> None:
     assert left["intrinsics"][0, 0].item() == pytest.approx(721.5377 / 1242, rel=1e-6)
     assert not np.allclose(left["frames"].numpy(), right["frames"].numpy())
     assert (left["folder"], left["frame"], left["side"]) == (DRIVE, 5, "l")
+
+
+def test_odometry_frames_are_found_as_png_or_converted_jpg_but_never_mixed(tmp_path):
+    folder = tmp_path / "sequences" / "09" / "image_2"
+    folder.mkdir(parents=True)
+    for name in ("000001.jpg", "000000.jpg", "notes.jpg"):
+        (folder / name).write_bytes(b"")
+    assert [p.name for p in list_sequence_frames(tmp_path, 9)] == ["000000.jpg", "000001.jpg"]
+    with pytest.raises(PoseconsError, match=r"image_2: no \*\.png frames"):
+        list_sequence_frames(tmp_path, 9, img_ext=".png")
+    (folder / "000002.png").write_bytes(b"")
+    with pytest.raises(PoseconsError, match="both .png and .jpg"):
+        list_sequence_frames(tmp_path, "09")

@@ -26,13 +26,23 @@ def read_odometry_projection(calib_path: Path, cam: int = 2) -> np.ndarray:
     return calib_matrix(read_calib_file(calib_path), f"P{cam}", (3, 4), calib_path)
 
 
-def list_sequence_frames(data_path: Path, sequence: int | str, side: str = "l", img_ext: str = ".png") -> list[Path]:
-    """Sorted image paths of one sequence's camera 2 (``l``) or 3 (``r``), for evaluation."""
+def list_sequence_frames(
+    data_path: Path, sequence: int | str, side: str = "l", img_ext: str | None = None
+) -> list[Path]:
+    """Sorted image paths of one sequence's camera 2 (``l``) or 3 (``r``), for evaluation.
+
+    ``img_ext`` None: whichever of .png (KITTI's own) and .jpg (converted, as Monodepth2 trains on)
+    the folder holds; a folder holding both is refused rather than guessed.
+    """
     folder = sequence_dir(data_path, sequence) / f"image_{SIDE_TO_CAMERA[side]}"
-    frames = sorted(p for p in folder.glob(f"*{img_ext}") if p.stem.isdigit())
-    if not frames:
-        raise PoseconsError(f"{folder}: no *{img_ext} frames found")
-    return frames
+    exts = [img_ext] if img_ext else [".png", ".jpg"]
+    found = {ext: sorted(p for p in folder.glob(f"*{ext}") if p.stem.isdigit()) for ext in exts}
+    found = {ext: frames for ext, frames in found.items() if frames}
+    if not found:
+        raise PoseconsError(f"{folder}: no {' or '.join('*' + e for e in exts)} frames found")
+    if len(found) > 1:
+        raise PoseconsError(f"{folder}: holds both .png and .jpg frames; keep one kind")
+    return next(iter(found.values()))
 
 
 class KittiOdometryDataset(FrameDataset):
