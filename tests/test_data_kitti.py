@@ -13,10 +13,10 @@ from posecons.data.gt import improved_gt_path, lidar_gt, read_improved_gt, velo_
 from posecons.data.io import load_velodyne
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
-from posecons.errors import PoseconsError
 from posecons.data.oxts import oxts_to_poses, read_oxts
 from posecons.data.splits import read_split, read_static_frames, read_test_scenes
 from posecons.data.trajectory_io import read_kitti_poses
+from posecons.errors import PoseconsError
 
 DRIVE = "2011_09_26/2011_09_26_drive_0002_sync"
 
