@@ -74,6 +74,9 @@ class ModelConfig:
     max_depth: float = 100.0
     scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])  # decoder outputs at 1/2^s size; any of 0-3
     frame_ids: list[int] = field(default_factory=lambda: [0, -1, 1])  # target first, then sources
+    # BatchNorm statistics of the pose net's constraint pairs in training: "own" (each pair group its own, as
+    # separate pose-net calls would give) or "temporal" (the temporal pairs' statistics of the same step)
+    constraint_norm: str = "own"
 
 
 @dataclass
@@ -162,6 +165,8 @@ class Config:
             raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
         if m.num_layers not in (10, 18, 34, 50):
             raise PoseconsError(f"model.num_layers must be 10, 18, 34 or 50, got {m.num_layers}")
+        if m.constraint_norm not in ("own", "temporal"):
+            raise PoseconsError(f"model.constraint_norm must be 'own' or 'temporal', got {m.constraint_norm!r}")
         if m.pretrained not in (True, False, "auto"):
             raise PoseconsError(f"model.pretrained must be true, false or 'auto', got {m.pretrained!r}")
         if not m.frame_ids or m.frame_ids[0] != 0 or len(set(m.frame_ids)) != len(m.frame_ids):

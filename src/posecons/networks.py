@@ -70,13 +70,23 @@ class GroupedBatchNorm2d(nn.BatchNorm2d):
 
     groups: int = 1
     tracked: int = 1
+    reference: str = "own"
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if not self.training or self.groups == 1:
             return super().forward(x)
         out = []
-        for i, chunk in enumerate(x.chunk(self.groups)):
+        chunks = x.chunk(self.groups)
+        if self.reference == "temporal":  # constraint groups see the tracked groups' batch statistics
+            ref = torch.cat(chunks[: self.tracked]).float()
+            var, mean = torch.var_mean(ref, (0, 2, 3), correction=0)
+            scale = self.weight * torch.rsqrt(var + self.eps)
+            shift = self.bias - mean * scale
+        for i, chunk in enumerate(chunks):
             track = i < self.tracked
+            if not track and self.reference == "temporal":
+                out.append((chunk * scale[:, None, None] + shift[:, None, None]).to(chunk.dtype))
+                continue
             out.append(
                 F.batch_norm(
                     chunk,
@@ -222,9 +232,10 @@ class DepthNet(nn.Module):
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(self, num_layers: int = 18, imagenet: dict | None = None):
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, constraint_norm: str = "own"):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, norm_layer=GroupedBatchNorm2d)
+        self.constraint_norm = constraint_norm
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
     def forward(
@@ -237,4 +248,5 @@ class PoseNet(nn.Module):
         for bn in self.encoder.modules():
             if isinstance(bn, GroupedBatchNorm2d):
                 bn.groups, bn.tracked = groups, groups if tracked is None else tracked
+                bn.reference = self.constraint_norm
         return self.decoder(self.encoder(torch.cat([image_a, image_b], 1))[-1])
