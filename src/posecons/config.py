@@ -43,6 +43,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     "loss.id_weight": _at_least(0),
     "loss.cyc_weight": _at_least(0),
     "loss.constraint_start_step": _at_least(0),
+    "loss.depth_consistency_weight": _at_least(0),
     "data.split": (bool, "must name a split"),
     "data.img_ext": (bool, "must be an extension such as .png"),
     "data.flip_prob": _FRACTION,
@@ -89,6 +90,9 @@ class LossConfig:
     constraint_start_step: int = 0  # the authors' released code waited 2000 steps
     identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
     translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
+    # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
+    # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was
+    depth_consistency_weight: float = 0.0
 
 
 @dataclass
