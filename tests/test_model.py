@@ -137,8 +137,9 @@ def test_pose_conventions_with_true_motion(n):
     assert good["photometric"] < 0.3 * flipped["photometric"]  # the right direction explains the motion
 
 
-def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32():
-    model = PoseConsModel(make_config(ALL))
+@pytest.mark.parametrize("dc_weight", [0.0, 0.1])
+def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32(dc_weight):
+    model = PoseConsModel(make_config(ALL, **{"loss.depth_consistency_weight": dc_weight}))
     inner = []
     for net in (model.depth_net, model.pose_net):
         net.encoder.net.layer4.register_forward_hook(lambda mod, inp, out: inner.append(out.dtype))
@@ -151,6 +152,7 @@ def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32():
     assert raw == [torch.float32] * 2
     assert all(T.dtype == torch.float32 for T in outputs["poses"].values())  # ... as are poses, warping
     assert all(v.dtype == torch.float32 and torch.isfinite(v) for v in losses.values())  # and losses in fp32
+    assert ("dc" in losses) == (dc_weight > 0)
     losses["total"].backward()
 
 
