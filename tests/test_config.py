@@ -50,6 +50,8 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
         ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
+        ("train.ema_decay=-0.1", r"^train.ema_decay must be in \[0, 1\), got -0.1$"),
+        ("train.ema_decay=1.0", r"^train.ema_decay must be in \[0, 1\), got 1.0$"),
     ],
 )
 def test_bad_values_are_rejected(override, message):

@@ -62,6 +62,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     "train.val_samples": _at_least(1),
     "train.checkpoint_every": _at_least(0),
     "train.max_bad_steps": _at_least(1),
+    "train.ema_decay": (lambda v: 0 <= v < 1, "must be in [0, 1)"),
 }
 
 
@@ -133,6 +134,9 @@ class TrainConfig:
     checkpoint_every: int = 500  # steps between `last` checkpoints (and at every epoch end); 0: epoch ends only
     keep_epochs: int = -1  # per-epoch weight files kept (the newest); -1 keeps all, 0 none
     max_bad_steps: int = 5  # consecutive non-finite losses before the run stops
+    # EMA of the weights and BatchNorm buffers after every optimiser step, ema ← d·ema + (1 − d)·w, for
+    # validation, best.pt and the final weights (last.pt also keeps the raw ones); 0: off
+    ema_decay: float = 0.0
 
 
 @dataclass
