@@ -3,7 +3,7 @@ import pickle
 import pytest
 import torch
 
-from posecons.checkpoint import load_checkpoint, load_model, save_checkpoint, save_safetensors
+from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model, save_checkpoint, save_safetensors
 from posecons.config import load_config
 from posecons.errors import PoseconsError
 from posecons.model import PoseConsModel
@@ -53,3 +53,17 @@ def test_architecture_mismatch_and_missing_file(tmp_path):
         load_model(tmp_path / "m.pt")
     with pytest.raises(PoseconsError, match="does not exist"):
         load_model(tmp_path / "missing.pt")
+
+
+def test_description_says_whether_the_weights_are_raw_or_an_ema(tmp_path):
+    from posecons.evaluation.compare import checkpoint_note
+
+    model, cfg = small_model()
+    save_checkpoint(tmp_path / "old.pt", {"config": cfg.to_dict(), "model": model.state_dict(), "step": 3})
+    save_checkpoint(
+        tmp_path / "ema.pt",
+        {"config": cfg.to_dict(), "model": model.state_dict(), "step": 5, "weights": "EMA (decay 0.99)"},
+    )
+    assert describe_checkpoint(tmp_path / "old.pt")["weights"] == "raw"  # written before the EMA option
+    info = describe_checkpoint(tmp_path / "ema.pt")
+    assert info["weights"] == "EMA (decay 0.99)" and checkpoint_note(info).endswith("; weights: EMA (decay 0.99)")

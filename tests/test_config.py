@@ -39,6 +39,7 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("train.lr=nan", "train.lr must be a finite number, got nan"),
         ("train.lr=0", "train.lr must be > 0"),
         ("loss.fb_weight=-.inf", "loss.fb_weight must be a finite number"),
+        ("loss.depth_consistency_weight=-0.1", "loss.depth_consistency_weight must be ≥ 0, got -0.1"),
         ("data.num_workers=-1", "data.num_workers must be ≥ 0"),
         ("data.flip_prob=1.5", r"data.flip_prob must be in \[0, 1\]"),
         ("loss.identity_fraction=-0.1", r"loss.identity_fraction must be in \[0, 1\]"),
@@ -49,6 +50,8 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
         ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
+        ("train.ema_decay=-0.1", r"^train.ema_decay must be in \[0, 1\), got -0.1$"),
+        ("train.ema_decay=1.0", r"^train.ema_decay must be in \[0, 1\), got 1.0$"),
     ],
 )
 def test_bad_values_are_rejected(override, message):

@@ -10,10 +10,13 @@ from posecons.geometry import (
     flip_intrinsics,
     invert_pose,
     make_pose,
+    pixels_to_grid,
     pose_distance,
     pose_vec_to_mat,
     project,
+    project_depth,
     scale_intrinsics,
+    transform_points,
     warp,
 )
 
@@ -187,3 +190,22 @@ def test_warping_a_flipped_frame_with_the_flipped_k_is_the_flipped_warp(dtype):
     naive[0, 0, 2] = 1 - naive[0, 0, 2]
     off = warp(src.flip(-1), depth.flip(-1), S @ T @ S, scale_intrinsics(naive, h, w))
     assert (off - warped.flip(-1)).abs().max() > 0.05
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_project_depth_gives_the_points_depth_in_the_source_camera_and_warps_grid(dtype):
+    b, h, w = 2, 12, 20
+    depth = torch.rand(b, 1, h, w, dtype=dtype) * 10 + 1
+    T, K = random_pose(b, dtype), torch.tensor([[25.0, 0, 9.5], [0, 25.0, 5.5], [0, 0, 1]], dtype=dtype).expand(b, 3, 3)
+    projected, grid = project_depth(depth, T, K)
+    points = transform_points(T, backproject(depth, K))
+    assert projected.shape == (b, 1, h, w) and grid.shape == (b, h, w, 2)
+    assert torch.equal(projected.flatten(1), points[:, 2])
+    # warp samples at exactly this grid: the same maths in the same order, so bit-identical
+    assert torch.equal(grid, pixels_to_grid(project(points, K), h, w))
+    src = torch.rand(b, 3, h, w, dtype=dtype)
+    expected = torch.nn.functional.grid_sample(src, grid, padding_mode="border", align_corners=True)
+    assert torch.equal(warp(src, depth, T, K), expected)
+    # a pure translation along z: every point's depth grows by t_z
+    Tz = make_pose(torch.eye(3, dtype=dtype).expand(b, 3, 3), torch.tensor([0.0, 0.0, 0.7], dtype=dtype).expand(b, 3))
+    assert torch.allclose(project_depth(depth, Tz, K)[0], depth + 0.7, atol=TOL[dtype] * 10)

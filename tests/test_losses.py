@@ -1,9 +1,10 @@
 import pytest
 import torch
 
-from posecons.geometry import invert_pose, pose_vec_to_mat
+from posecons.geometry import invert_pose, make_pose, pose_vec_to_mat
 from posecons.losses import (
     cycle_loss,
+    depth_consistency_loss,
     forward_backward_loss,
     identity_loss,
     min_reprojection,
@@ -119,3 +120,73 @@ def test_ssim_matches_window_by_window_formula():
         expected[c, i, j] = np.clip((1 - ssim) / 2, 0, 1)
     out = ssim_dissimilarity(torch.from_numpy(x)[None], torch.from_numpy(y)[None])[0].numpy()
     assert np.allclose(out, expected, atol=1e-12)
+
+
+def plane_seen_after(t, dtype=torch.float64, b=2, h=16, w=24, z=10.0, f=20.0):
+    """A fronto-parallel plane at depth z seen by the target, the motion T_{f←0} = [I | t] and pixel K.
+    After any such translation the plane is still fronto-parallel, at depth z + t_z in camera f."""
+    K = torch.tensor([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]], dtype=dtype).expand(b, 3, 3)
+    T = make_pose(torch.eye(3, dtype=dtype).expand(b, 3, 3), torch.tensor(t, dtype=dtype).expand(b, 3))
+    return torch.full((b, 1, h, w), z, dtype=dtype), T, K
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("t", [(0.0, 0.0, 0.5), (0.0, 0.0, -0.8), (0.3, -0.2, 0.5)])
+def test_depth_consistency_is_zero_for_consistent_depth_and_pose(dtype, t):
+    depth, T, K = plane_seen_after(t, dtype)
+    source = torch.full_like(depth, 10.0 + t[2])  # D_f: the plane's depth in camera f, everywhere
+    assert depth_consistency_loss(depth, source, T, K).item() == pytest.approx(0, abs=1e-6)
+    assert depth_consistency_loss(depth, source * 1.01, T, K).item() > 1e-3
+
+
+def test_depth_consistency_grows_with_inconsistency_as_the_closed_form():
+    depth, T, K = plane_seen_after((0.1, 0.0, 0.5))
+    values = []
+    for s in (1.1, 1.3, 2.0):  # D_f = s·D_{0→f} at every pixel: D_diff = |s − 1| / (s + 1)
+        values.append(depth_consistency_loss(depth, torch.full_like(depth, s * 10.5), T, K).item())
+        assert values[-1] == pytest.approx(abs(s - 1) / (s + 1), rel=1e-9)
+    assert values[0] < values[1] < values[2]
+    under = depth_consistency_loss(depth, torch.full_like(depth, 10.5 / 1.3), T, K).item()
+    assert under == pytest.approx(values[1], rel=1e-9)  # a source that is 1.3× too near costs the same
+
+
+def test_depth_consistency_counts_only_pixels_that_land_inside_the_source():
+    h, w, z, f = 16, 24, 10.0, 20.0
+    depth, T, K = plane_seen_after((3.5 * z / f, 0.0, 0.0), h=h, w=w, z=z, f=f)  # target u lands at u + 3.5
+    source = torch.full_like(depth, z)
+    source[..., -1] = 5 * z  # wrong in the last column only
+    # Of each row, u = 0 … W−5 land inside; only u = W−5 reaches the last column, at W−1.5, where the
+    # bilinear sample is 3z: D_diff = 2z / 4z. The 4 pixels beyond the edge (border value 5z) do not count.
+    loss = depth_consistency_loss(depth, source, T, K)
+    assert loss.item() == pytest.approx(0.5 / (w - 4), rel=1e-6)  # project() adds eps to z
+    # Points behind camera f land nowhere: nothing counts, and the gradient is zero, not NaN.
+    depth.requires_grad_()
+    _, behind, _ = plane_seen_after((0.0, 0.0, -2 * z), h=h, w=w, z=z, f=f)
+    loss = depth_consistency_loss(depth, source, behind, K)
+    loss.backward()
+    assert loss.item() == 0 and torch.equal(depth.grad, torch.zeros_like(depth))
+
+
+def _random_consistency_case(dtype):
+    g = torch.Generator().manual_seed(1)
+    depth = (torch.rand(2, 1, 12, 20, generator=g, dtype=torch.float64) * 5 + 2).to(dtype).requires_grad_()
+    source = (torch.rand(2, 1, 12, 20, generator=g, dtype=torch.float64) * 5 + 2).to(dtype).requires_grad_()
+    T = pose_vec_to_mat(
+        (torch.randn(2, 1, 3, generator=g, dtype=torch.float64) * 0.02).to(dtype),
+        (torch.randn(2, 1, 3, generator=g, dtype=torch.float64) * 0.3).to(dtype),
+    )
+    K = torch.tensor([[18.0, 0, 9.5], [0, 18.0, 5.5], [0, 0, 1]], dtype=dtype).expand(2, 3, 3)
+    loss = depth_consistency_loss(depth, source, T, K)
+    loss.backward()
+    return loss.detach(), depth.grad, source.grad
+
+
+def test_depth_consistency_gradients_reach_both_depths_and_float32_agrees_with_float64():
+    ref, ref_target_grad, ref_source_grad = _random_consistency_case(torch.float64)
+    val, target_grad, source_grad = _random_consistency_case(torch.float32)
+    assert 0.05 < ref.item() < 1  # a real inconsistency, not the zero of an empty mask
+    for grad in (ref_target_grad, ref_source_grad):
+        assert torch.isfinite(grad).all() and grad.abs().sum() > 0
+    assert val.item() == pytest.approx(ref.item(), rel=1e-5)
+    assert torch.allclose(target_grad.double(), ref_target_grad, rtol=1e-3, atol=1e-7)
+    assert torch.allclose(source_grad.double(), ref_source_grad, rtol=1e-3, atol=1e-7)

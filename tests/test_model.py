@@ -137,8 +137,9 @@ def test_pose_conventions_with_true_motion(n):
     assert good["photometric"] < 0.3 * flipped["photometric"]  # the right direction explains the motion
 
 
-def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32():
-    model = PoseConsModel(make_config(ALL))
+@pytest.mark.parametrize("dc_weight", [0.0, 0.1])
+def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32(dc_weight):
+    model = PoseConsModel(make_config(ALL, **{"loss.depth_consistency_weight": dc_weight}))
     inner = []
     for net in (model.depth_net, model.pose_net):
         net.encoder.net.layer4.register_forward_hook(lambda mod, inp, out: inner.append(out.dtype))
@@ -151,6 +152,7 @@ def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32():
     assert raw == [torch.float32] * 2
     assert all(T.dtype == torch.float32 for T in outputs["poses"].values())  # ... as are poses, warping
     assert all(v.dtype == torch.float32 and torch.isfinite(v) for v in losses.values())  # and losses in fp32
+    assert ("dc" in losses) == (dc_weight > 0)
     losses["total"].backward()
 
 
@@ -237,3 +239,66 @@ def test_networks_see_net_frames_and_losses_the_unaugmented_frames():
     _, plain = model(batch)
     _, augmented = model(jittered)
     assert torch.equal(plain["photometric"], augmented["photometric"])
+
+
+class DepthFromImage(nn.Module):
+    """A depth net whose sigmoid output is the input image's first channel, at every scale."""
+
+    def forward(self, images):
+        return {s: torch.nn.functional.avg_pool2d(images[:, :1], 2**s) for s in range(4)}
+
+
+def sigmoid_for_depth(depth: float) -> float:
+    """The depth net output that disp_to_depth turns into ``depth`` (min 0.1, max 100)."""
+    return (1 / depth - 1 / 100) / (1 / 0.1 - 1 / 100)
+
+
+@pytest.mark.parametrize("swapped", [False, True])
+def test_depth_consistency_pairs_each_source_depth_with_its_pose(swapped):
+    # 1 cm forward per pair: T_{+1←0} moves the target's points (depth 10) to depth 10.01 and
+    # T_{−1←0} to 9.99, so sources that predict exactly those depths are consistent.
+    depths = {0: 10.0, -1: 9.99, 1: 10.01} if not swapped else {0: 10.0, -1: 10.01, 1: 9.99}
+    frames = torch.stack([torch.full((2, 3, H, W), sigmoid_for_depth(depths[f])) for f in (0, -1, 1)], 1)
+    K = torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]]).expand(2, 3, 3).clone()
+    model = PoseConsModel(make_config(**{"loss.depth_consistency_weight": 0.5}))
+    model.depth_net, model.pose_net = DepthFromImage(), ForwardMotion()
+    outputs, losses = model({"frames": frames, "intrinsics": K})
+    assert torch.allclose(outputs["depth"], torch.full((2, 1, H, W), 10.0), rtol=1e-5)  # the target's own depth
+    expected = 0.02 / 20 if swapped else 0.0  # |10.01 − 9.99| / (10.01 + 9.99) for both sources
+    assert losses["dc"].item() == pytest.approx(expected, abs=5e-6)
+    assert torch.allclose(losses["total"], losses["photometric"] + losses["smoothness"] + 0.5 * losses["dc"])
+
+
+def test_depth_consistency_runs_one_depth_pass_over_all_frames_only_when_on():
+    torch.manual_seed(0)
+    off, on = (
+        PoseConsModel(make_config(["cyc"])),
+        PoseConsModel(make_config(["cyc"], **{"loss.depth_consistency_weight": 0.1})),
+    )
+    on.load_state_dict(off.state_dict())
+    calls = {}
+    for name, model in (("off", off), ("on", on)):
+        model.depth_net.encoder.register_forward_hook(
+            lambda mod, inp, out, name=name: calls.setdefault(name, []).append(inp[0].shape[0])
+        )
+    batch = random_batch(b=3)
+    out_off, loss_off = off(batch)
+    out_on, loss_on = on(batch)
+    assert calls == {"off": [3], "on": [9]}  # the target alone, or target and both sources in one pass
+    assert "dc" not in loss_off and set(loss_on) == set(loss_off) | {"dc"}
+    assert torch.isfinite(loss_on["dc"]) and loss_on["dc"] > 0
+    weighted = loss_on["photometric"] + loss_on["smoothness"] + 0.1 * loss_on["cyc"] + 0.1 * loss_on["dc"]
+    assert torch.allclose(loss_on["total"], weighted)
+    loss_on["total"].backward()
+    for net in (on.depth_net.encoder, on.depth_net.decoder, on.pose_net.encoder):
+        assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in net.parameters())
+    # In eval mode (per-sample BatchNorm) the target's disparities are the same with the extra pass;
+    # the training pass above gave the two different running statistics (`on` saw the sources too).
+    on.load_state_dict(off.state_dict())
+    off.eval(), on.eval()
+    out_off, loss_off = off(batch)
+    out_on, loss_on = on(batch)
+    for s in range(4):
+        assert out_on["disp"][s].shape == (3, 1, H // 2**s, W // 2**s)
+        assert torch.allclose(out_on["disp"][s], out_off["disp"][s], atol=1e-6)
+    assert loss_on["photometric"].item() == pytest.approx(loss_off["photometric"].item(), rel=1e-5)

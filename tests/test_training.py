@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from posecons.checkpoint import load_checkpoint
+from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
@@ -62,6 +62,9 @@ def test_few_steps_every_variant(synth_data, tmp_path, constraints):
     assert 0 < metrics[-1]["abs_rel"] < 10 and metrics[-1]["scale_cv"] >= 0  # synth has LiDAR: GT metrics
     state = load_checkpoint(run / "checkpoints" / "last.pt")
     assert state["step"] == 2 and state["config"]["loss"]["constraints"] == [c for c in constraints.split(",") if c]
+    # train.ema_decay is off by default: the checkpoints hold the raw weights alone, and say so
+    assert best["weights"] == state["weights"] == summary["weights"] == "raw"
+    assert "raw_model" not in state and "ema_updates" not in state
 
 
 def test_gradient_accumulation_counts_optimiser_steps(synth_data, tmp_path):
@@ -71,6 +74,47 @@ def test_gradient_accumulation_counts_optimiser_steps(synth_data, tmp_path):
     assert trainer.fit()["steps"] == 2
     assert trainer.optimizer.state_dict()["state"][0]["step"] == 2  # two updates from four micro-batches
     assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())
+
+
+def test_ema_is_the_formula_of_the_raw_weights_and_what_validation_and_checkpoints_use(synth_data, tmp_path):
+    decay, run = 0.9, tmp_path / "run"
+    cfg = tiny_config(f"train.ema_decay={decay}", "train.max_steps=2", "train.val_every=2", "train.lr=1e-3")
+    trainer = Trainer(cfg, synth_data, run, quiet=True)
+    raw = []  # the trained weights and buffers after each optimiser step
+    trainer.optimizer.register_step_post_hook(
+        lambda *_: raw.append({k: v.clone() for k, v in trainer.model.state_dict().items()})
+    )
+    validated, validate = [], trainer.validator.run
+    trainer.validator.run = lambda model, step: validated.append(model) or validate(model, step)
+    trainer.fit()
+    ema = trainer.ema.module.state_dict()
+    assert len(raw) == 2 and validated == [trainer.ema.module]
+    floats = [k for k, v in ema.items() if v.is_floating_point()]  # parameters and BatchNorm statistics
+    assert any("running_mean" in k for k in floats)
+    assert sum(not torch.allclose(raw[0][k], raw[1][k]) for k in floats) > len(floats) / 2  # the weights moved
+    for k in floats:  # the first update copies step 1's weights; the second averages in step 2's
+        assert torch.allclose(ema[k], decay * raw[0][k] + (1 - decay) * raw[1][k], rtol=1e-5, atol=1e-8), k
+    last, best = load_checkpoint(run / "checkpoints" / "last.pt"), load_checkpoint(run / "checkpoints" / "best.pt")
+    assert last["weights"] == best["weights"] == describe_checkpoint(run / "checkpoints" / "best.pt")["weights"]
+    assert last["weights"] == "EMA (decay 0.9)" and last["ema_updates"] == 2 and "raw_model" not in best
+    for k in ema:
+        assert torch.equal(last["model"][k], ema[k]) and torch.equal(best["model"][k], ema[k]), k
+        assert torch.equal(last["raw_model"][k], raw[1][k]), k
+    loaded = load_model(run / "checkpoints" / "last.pt")[0].state_dict()  # inference gets the EMA
+    assert all(torch.equal(loaded[k], ema[k]) for k in ema)
+
+
+def test_resume_with_ema_gives_the_uninterrupted_weights(synth_data, tmp_path):
+    sets = ["train.ema_decay=0.8", "train.val_every=off", "train.checkpoint_every=1", "loss.constraints=[cyc]"]
+    train(tiny_config(*sets, "train.max_steps=4"), synth_data, tmp_path / "full", quiet=True)
+    train(tiny_config(*sets, "train.max_steps=2"), synth_data, tmp_path / "part", quiet=True)
+    train(tiny_config(*sets, "train.max_steps=4"), synth_data, tmp_path / "part", resume=True, quiet=True)
+    full, resumed = (load_checkpoint(tmp_path / run / "checkpoints" / "last.pt") for run in ("full", "part"))
+    assert full["ema_updates"] == resumed["ema_updates"] == 4
+    for weights in ("model", "raw_model"):  # the EMA, and the raw weights it averages
+        for key, value in full[weights].items():
+            assert torch.equal(value, resumed[weights][key]), (weights, key)
+    assert any(not torch.equal(v, full["raw_model"][k]) for k, v in full["model"].items())
 
 
 def metrics_at_best(run: Path, key: str) -> float:

@@ -74,8 +74,8 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
 
 
 def describe_checkpoint(path: str | Path) -> dict[str, Any]:
-    """What a report must say of the weights it evaluated: file, step, how they were chosen, and
-    how the encoders were initialised."""
+    """What a report must say of the weights it evaluated: file, step, how they were chosen, how
+    the encoders were initialised, and whether they are the raw or the EMA weights."""
     path = Path(path)
     if path.suffix == ".safetensors":
         return {"file": str(path), "selected_by": "exported weights (see the run they came from)"}
@@ -90,6 +90,7 @@ def describe_checkpoint(path: str | Path) -> dict[str, Any]:
             else "none: the weights at that step"
         ),
         "initialisation": state.get("initialisation", "not recorded"),
+        "weights": state.get("weights", "raw"),  # checkpoints from before the EMA option hold raw weights
     }
 
 

@@ -43,6 +43,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     "loss.id_weight": _at_least(0),
     "loss.cyc_weight": _at_least(0),
     "loss.constraint_start_step": _at_least(0),
+    "loss.depth_consistency_weight": _at_least(0),
     "data.split": (bool, "must name a split"),
     "data.img_ext": (bool, "must be an extension such as .png"),
     "data.flip_prob": _FRACTION,
@@ -61,6 +62,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     "train.val_samples": _at_least(1),
     "train.checkpoint_every": _at_least(0),
     "train.max_bad_steps": _at_least(1),
+    "train.ema_decay": (lambda v: 0 <= v < 1, "must be in [0, 1)"),
 }
 
 
@@ -92,6 +94,9 @@ class LossConfig:
     constraint_start_step: int = 0  # the authors' released code waited 2000 steps
     identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
     translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
+    # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
+    # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was
+    depth_consistency_weight: float = 0.0
 
 
 @dataclass
@@ -132,6 +137,9 @@ class TrainConfig:
     checkpoint_every: int = 500  # steps between `last` checkpoints (and at every epoch end); 0: epoch ends only
     keep_epochs: int = -1  # per-epoch weight files kept (the newest); -1 keeps all, 0 none
     max_bad_steps: int = 5  # consecutive non-finite losses before the run stops
+    # EMA of the weights and BatchNorm buffers after every optimiser step, ema ← d·ema + (1 − d)·w, for
+    # validation, best.pt and the final weights (last.pt also keeps the raw ones); 0: off
+    ema_decay: float = 0.0
 
 
 @dataclass

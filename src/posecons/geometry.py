@@ -172,6 +172,21 @@ def pixels_to_grid(pixels: torch.Tensor, height: int, width: int) -> torch.Tenso
     return grid.view(pixels.shape[0], 2, height, width).permute(0, 2, 3, 1)
 
 
+def project_depth(depth: torch.Tensor, T: torch.Tensor, K: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The target's pixels seen from the source camera: back-project ``depth`` (B, 1, H, W) through
+    pixel K (B, 3, 3), move the points by T_{source←target} (B, 4, 4) and project them.
+
+    Returns their depth in the source camera, D_{target→source} (B, 1, H, W), and where they land
+    in the source image as a grid_sample grid (B, H, W, 2) for ``align_corners=True``; pixels
+    landing inside the image have both grid coordinates in [−1, 1].
+    """
+    check_tensor("T", T, (depth.shape[0], 4, 4))
+    b, _, h, w = depth.shape
+    points = transform_points(T, backproject(depth, K))
+    grid = pixels_to_grid(project(points, K), h, w)
+    return points[:, 2:3].reshape(b, 1, h, w), grid
+
+
 def warp(source: torch.Tensor, depth: torch.Tensor, T: torch.Tensor, K: torch.Tensor) -> torch.Tensor:
     """Synthesise the target view from ``source`` (B, C, H, W) (SPEC §3).
 
@@ -183,8 +198,7 @@ def warp(source: torch.Tensor, depth: torch.Tensor, T: torch.Tensor, K: torch.Te
     _, _, h, w = depth.shape
     if source.shape[-2:] != (h, w):
         raise ValueError(f"source: expected spatial size {(h, w)} like depth, got {tuple(source.shape[-2:])}")
-    pixels = project(transform_points(T, backproject(depth, K)), K)
-    grid = pixels_to_grid(pixels, h, w)
+    _, grid = project_depth(depth, T, K)
     return F.grid_sample(source, grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
@@ -201,6 +215,7 @@ __all__ = [
     "pose_distance",
     "pose_vec_to_mat",
     "project",
+    "project_depth",
     "scale_intrinsics",
     "transform_points",
     "warp",

@@ -1,5 +1,5 @@
-"""Losses: Monodepth2's photometric and smoothness terms (SPEC §4) and the paper's three
-pose constraints (SPEC §5). Each function is one equation.
+"""Losses: Monodepth2's photometric and smoothness terms (SPEC §4), the paper's three pose
+constraints (SPEC §5) and SC-SfMLearner's depth consistency (an option). Each function is one equation.
 """
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from .geometry import check_tensor, invert_pose, pose_distance
+from .geometry import check_tensor, invert_pose, pose_distance, project_depth
 
 _IMAGE = (None, None, None, None)
 
@@ -70,6 +70,27 @@ def smoothness_loss(disp: torch.Tensor, img: torch.Tensor) -> torch.Tensor:
     grad_ix = (img[..., :, :-1] - img[..., :, 1:]).abs().mean(1, keepdim=True)
     grad_iy = (img[..., :-1, :] - img[..., 1:, :]).abs().mean(1, keepdim=True)
     return (grad_dx * torch.exp(-grad_ix)).mean() + (grad_dy * torch.exp(-grad_iy)).mean()
+
+
+def depth_consistency_loss(
+    target_depth: torch.Tensor, source_depth: torch.Tensor, T: torch.Tensor, K: torch.Tensor
+) -> torch.Tensor:
+    """Geometry consistency of SC-SfMLearner (Bian et al., NeurIPS 2019): mean of
+    D_diff = |D_{0→f} − D_f'| / (D_{0→f} + D_f') over the target pixels that land inside the source image.
+
+    target_depth: D_0 (B, 1, H, W); source_depth: D_f, the source frame's own prediction (B, 1, H, W);
+    T: T_{f←0} (B, 4, 4); K: pixel K (B, 3, 3) at this resolution. D_{0→f} is the depth of the
+    target's points in camera f, D_f' is D_f sampled bilinearly where they project. Points behind
+    camera f count as outside. Several sources go in as one batch (their pixels pooled in the mean).
+    """
+    check_tensor("source_depth", source_depth, tuple(target_depth.shape))
+    projected, grid = project_depth(target_depth, T, K)
+    sampled = F.grid_sample(source_depth, grid, mode="bilinear", padding_mode="border", align_corners=True)
+    inside = (grid.abs() <= 1).all(-1, keepdim=True).permute(0, 3, 1, 2) & (projected > 0)
+    # Outside pixels get D_diff = 0 from finite values, so neither the value nor the gradient sees them.
+    projected = torch.where(inside, projected, sampled)
+    diff = (projected - sampled).abs() / (projected + sampled)
+    return diff.sum() / inside.sum().clamp(min=1)
 
 
 # ----------------------------------------------------------------------------- pose constraints

@@ -20,6 +20,7 @@ from .config import Config
 from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrinsics, warp
 from .losses import (
     cycle_loss,
+    depth_consistency_loss,
     forward_backward_loss,
     identity_loss,
     min_reprojection,
@@ -117,7 +118,13 @@ class PoseConsModel(nn.Module):
         K = check_tensor("batch['intrinsics']", batch["intrinsics"], (frames.shape[0], 3, 3)).float()
         index = {f: i for i, f in enumerate(m.frame_ids)}
 
-        disps = self.depth_net(net_frames[:, 0])
+        if lo.depth_consistency_weight > 0:  # target and sources in one pass: the sources' depth is needed too
+            b = frames.shape[0]
+            all_disps = self.depth_net(torch.cat([net_frames[:, i] for i in range(len(m.frame_ids))]))
+            disps = {s: d[:b] for s, d in all_disps.items()}
+            source_disp = all_disps[0][b:]  # (S·B, 1, H, W), the sources in frame_ids order
+        else:
+            disps = self.depth_net(net_frames[:, 0])
 
         # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group.
         constraints = self.active_constraints(step)
@@ -147,8 +154,12 @@ class PoseConsModel(nn.Module):
                     P.T(0, prev, input=temporal(prev)),
                     lo.translation_norm,
                 )
-            weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
-            losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in constraints)
+            terms = list(constraints)
+            if lo.depth_consistency_weight > 0:
+                losses["dc"] = self._depth_consistency(disps[0], source_disp, K, poses)
+                terms.append("dc")
+            weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight, "dc": lo.depth_consistency_weight}
+            losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in terms)
 
         outputs = {
             "disp": disps,
@@ -157,6 +168,23 @@ class PoseConsModel(nn.Module):
             "automask": automask,
         }
         return outputs, losses
+
+    def _depth_consistency(
+        self, disp: torch.Tensor, source_disp: torch.Tensor, K_norm: torch.Tensor, poses: dict[int, torch.Tensor]
+    ) -> torch.Tensor:
+        """SC-SfMLearner's depth consistency of the target disparity (B, 1, H, W) with the sources'
+        (S·B, 1, H, W), warped by T_{f←0}. Scale 0 only: the full-resolution depth is the one
+        evaluated, and the coarser scales, upsampled to that size, would repeat the same constraint
+        at less detail for one more projection each."""
+        m = self.config.model
+        sources = m.frame_ids[1:]
+        depth, source_depth = (disp_to_depth(d.float(), m.min_depth, m.max_depth)[1] for d in (disp, source_disp))
+        return depth_consistency_loss(
+            depth.repeat(len(sources), 1, 1, 1),
+            source_depth,
+            torch.cat([poses[f] for f in sources]),
+            scale_intrinsics(K_norm, m.height, m.width).repeat(len(sources), 1, 1),
+        )
 
     def _view_synthesis_losses(
         self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict, poses: dict[int, torch.Tensor]

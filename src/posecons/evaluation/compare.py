@@ -85,5 +85,5 @@ def checkpoint_note(info: dict) -> str:
     step = f", step {info['step']}" if info.get("step") is not None else ""
     return (
         f"{Path(info['file']).name}{step}; selected by: {info['selected_by']}; "
-        f"initialisation: {info.get('initialisation', 'not recorded')}"
+        f"initialisation: {info.get('initialisation', 'not recorded')}; weights: {info.get('weights', 'not recorded')}"
     )

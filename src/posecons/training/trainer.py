@@ -6,6 +6,7 @@ that torchrun sets. The run directory holds everything of a run::
 
     RUN/config.yaml             resolved config
     RUN/checkpoints/last.pt     model, optimiser, scheduler, step, epoch, data position, RNG
+                                (with train.ema_decay > 0: "model" is the EMA, "raw_model" the trained weights)
     RUN/checkpoints/epoch_NN.pt weights (+ config, step) at each epoch end; train.keep_epochs of them
     RUN/checkpoints/best.pt     weights at the best validation abs rel (photometric loss without GT)
     RUN/tb/                     TensorBoard scalars and images
@@ -41,6 +42,7 @@ import torch
 import torch.distributed as dist
 import yaml
 from torch.nn.parallel import DistributedDataParallel
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import DataLoader, DistributedSampler
 from tqdm import tqdm
 
@@ -183,6 +185,13 @@ class Trainer:
         if t.sync_bn and self.env.world > 1:  # the pose net keeps its per-pair-group statistics
             model.depth_net = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model.depth_net)
         self.model = model
+        # The weight EMA follows the unwrapped model on the main rank, which validates and saves.
+        self.ema = (
+            AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(t.ema_decay), use_buffers=True)
+            if t.ema_decay > 0 and self.env.main
+            else None
+        )
+        self.weights = f"EMA (decay {t.ema_decay:g})" if t.ema_decay > 0 else "raw"  # what checkpoints hold
         self.ddp = (
             DistributedDataParallel(model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
             if self.env.world > 1
@@ -204,7 +213,10 @@ class Trainer:
         elif self.env.main:
             write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         if not self.quiet:
-            print(f"initialisation: {self.initialisation}; best.pt selected by {describe_selection(t.best_metric)}")
+            print(
+                f"initialisation: {self.initialisation}; best.pt selected by {describe_selection(t.best_metric)}"
+                + (f"; validation and checkpoints use the {self.weights} weights" if self.ema else "")
+            )
         self.writer = None
         if self.env.main:
             from torch.utils.tensorboard import SummaryWriter
@@ -216,10 +228,18 @@ class Trainer:
         random.seed(seed)
         torch.manual_seed(seed)
 
+    @property
+    def eval_model(self) -> PoseConsModel:
+        """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
+        return self.ema.module if self.ema is not None else self.model
+
     def state(self) -> dict[str, Any]:
+        ema = {"raw_model": self.model.state_dict(), "ema_updates": int(self.ema.n_averaged)} if self.ema else {}
         return {
             "config": self.config.to_dict(),
-            "model": self.model.state_dict(),
+            "model": self.eval_model.state_dict(),
+            **ema,
+            "weights": self.weights,
             "optimizer": self.optimizer.state_dict(),
             "scheduler": self.scheduler.state_dict(),
             "scaler": self.scaler.state_dict(),
@@ -260,7 +280,10 @@ class Trainer:
         self.config.model.pretrained = state["config"]["model"]["pretrained"]
         self.initialisation = state.get("initialisation", "not recorded (checkpoint predates the record)")
         try:
-            self.model.load_state_dict(state["model"])
+            self.model.load_state_dict(state.get("raw_model", state["model"]))
+            if self.ema is not None:  # "model" is the EMA, or the raw weights of a run without one (0 updates)
+                self.ema.module.load_state_dict(state["model"])
+                self.ema.n_averaged.fill_(state.get("ema_updates", 0))
         except RuntimeError as exc:
             raise PoseconsError(f"{path}: weights do not fit the model: {str(exc).splitlines()[0]}") from exc
         self.optimizer.load_state_dict(state["optimizer"])
@@ -289,7 +312,8 @@ class Trainer:
                 self.out / "checkpoints" / name,
                 {
                     "config": self.config.to_dict(),
-                    "model": self.model.state_dict(),
+                    "model": self.eval_model.state_dict(),
+                    "weights": self.weights,
                     "step": self.step,
                     "epoch": self.epoch,
                     "best": self.best,
@@ -371,6 +395,7 @@ class Trainer:
             "minutes": (self.seconds_before + seconds) / 60,
             "minutes_this_session": seconds / 60,
             "initialisation": self.initialisation,
+            "weights": self.weights,
             "best_metric": self.config.train.best_metric,
             "last_validation": last_metrics,
         }
@@ -456,6 +481,8 @@ class Trainer:
             return None, outputs
         self.scaler.step(self.optimizer)
         self.scaler.update()
+        if self.ema is not None:  # AveragedModel's first update copies the weights, then ema ← d·ema + (1 − d)·w
+            self.ema.update_parameters(self.model)
         self.optimizer.zero_grad(set_to_none=True)
         self.bad_steps = 0
         return {k: float(v.detach()) for k, v in losses.items()}, outputs
@@ -490,7 +517,7 @@ class Trainer:
         """Validate on the main rank; keep ``checkpoints/best.pt`` at the best score so far."""
         if not self.validator or not self.env.main:
             return {}
-        metrics = self.validator.run(self.model, self.step)
+        metrics = self.validator.run(self.eval_model, self.step)
         self.model.train()
         if not metrics:
             return metrics
