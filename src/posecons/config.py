@@ -13,7 +13,7 @@ import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Union
+from typing import Any, Optional, Union
 
 import yaml
 
@@ -104,6 +104,9 @@ class DataConfig:
     flip_prob: float = 0.5  # probability in [0, 1]
     jitter_prob: float = 0.5
     num_workers: int = 2  # DataLoader worker processes; 0 loads in the training process
+    # Folder written by `posecons cache` for this config (same size, data path and splits): the loader
+    # reads its resized frames instead of decoding the images; null: decode the images.
+    cache_dir: Optional[str] = None
     # Drop split lines whose frames (model.frame_ids) are not all on disk, printing how many, instead
     # of stopping at the first: e.g. frame offsets ±3 on a split made for ±1 near drive ends.
     skip_incomplete: bool = False
