@@ -121,7 +121,7 @@ class PoseConsModel(nn.Module):
         if fraction >= 1:
             return slice(None)
         k = constraint_sample_count(batch_size, fraction)
-        return torch.randperm(batch_size)[:k].sort().values.to(device)
+        return torch.randperm(batch_size)[:k].sort().values.to(device, non_blocking=True)
 
     def cycle_ids(self) -> tuple[int, int]:
         """(−n, +n): the nearest source on each side of the target (n = 1 for frames 0, −1, +1)."""
