@@ -168,6 +168,17 @@ CASES = [
         "prepare --input {in}/frames --out {in}/blocker/x --fx 1 --fy 1 --cx 1 --cy 1",
         ["--out", "blocker is a file"],
     ),
+    # cache
+    (
+        "cache-default-split-wrong-data",
+        "cache --data-path {syn} --config kitti/baseline --out {out}",
+        ["eigen_zhou/train_files.txt:1", "missing"],
+    ),
+    (
+        "cache-out-foreign-folder",
+        "cache --data-path {syn} --config kitti/baseline --set data.split=synth --out {in}/userdir",
+        ["userdir", "holds no frame cache"],
+    ),
     # build-split
     (
         "build-split-val-fraction",
@@ -202,6 +213,7 @@ CASES = [
         ["unreadable image", ".png"],
     ),
     ("train-frame-of-other-size", TRAIN.replace("{syn}", "{in}/odd_syn"), ["100×32 pixels", "same drive"]),
+    ("train-cache-dir-not-a-cache", TRAIN + " --set data.cache_dir={in}/userdir", ["userdir", "not a frame cache"]),
     ("train-devices-0", TRAIN + " --devices 0", ["--devices", "≥ 1"]),
     ("train-max-steps-negative", TRAIN + " --max-steps -1", ["--max-steps", "≥ 0"]),
     ("train-out-under-file", TRAIN.replace("--out {out}", "--out {in}/blocker/run"), ["--out", "blocker is a file"]),

@@ -43,6 +43,8 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("data.num_workers=-1", "data.num_workers must be ≥ 0"),
         ("data.flip_prob=1.5", r"data.flip_prob must be in \[0, 1\]"),
         ("loss.identity_fraction=-0.1", r"loss.identity_fraction must be in \[0, 1\]"),
+        ("loss.constraint_fraction=0", r"loss.constraint_fraction must be in \(0, 1\], got 0.0"),
+        ("loss.constraint_fraction=1.5", r"loss.constraint_fraction must be in \(0, 1\], got 1.5"),
         ("train.epochs=0", "train.epochs must be ≥ 1"),
         ("train.grad_accum=0", "train.grad_accum must be ≥ 1"),
         ("train.lr_decay_epochs=[0]", "train.lr_decay_epochs must be epochs ≥ 1"),

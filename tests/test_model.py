@@ -1,3 +1,4 @@
+import copy
 import itertools
 
 import pytest
@@ -5,8 +6,9 @@ import torch
 import torch.nn as nn
 
 from posecons.config import load_config
-from posecons.geometry import pose_vec_to_mat
-from posecons.model import PoseConsModel
+from posecons.geometry import invert_pose, pose_distance, pose_vec_to_mat
+from posecons.losses import cycle_loss, forward_backward_loss, identity_loss
+from posecons.model import PairPoses, PoseConsModel, constraint_sample_count, temporal
 
 H, W = 64, 96
 ALL = ["fb", "id", "cyc"]
@@ -302,3 +304,91 @@ def test_depth_consistency_runs_one_depth_pass_over_all_frames_only_when_on():
         assert out_on["disp"][s].shape == (3, 1, H // 2**s, W // 2**s)
         assert torch.allclose(out_on["disp"][s], out_off["disp"][s], atol=1e-6)
     assert loss_on["photometric"].item() == pytest.approx(loss_off["photometric"].item(), rel=1e-5)
+
+def test_constraint_fraction_one_is_the_whole_batch_bit_for_bit():
+    torch.manual_seed(3)
+    model = PoseConsModel(make_config(ALL))
+    today = copy.deepcopy(model)
+    batch = random_batch(b=3)
+    torch.manual_seed(7)
+    _, losses = model(batch)
+    rng_after = torch.get_rng_state()
+    # Today's pass: six equal pair groups, every constraint over the whole batch.
+    net, pairs = batch["frames"], today.pose_pairs(ALL)
+    a = torch.cat([net[:, (0, -1, 1).index(i)] for i, _ in pairs])
+    b = torch.cat([net[:, (0, -1, 1).index(j)] for _, j in pairs])
+    P = PairPoses(pairs, [3] * 6, *today.pose_net(a, b, groups=6, tracked=2))
+    fwd = {f: P.T(f, 0, input=temporal(f)) for f in (-1, 1)}
+    bwd = {f: P.T(0, f, input=temporal(f)[::-1]) for f in (-1, 1)}
+    assert torch.equal(losses["fb"], forward_backward_loss(torch.cat([fwd[-1], fwd[1]]), torch.cat([bwd[-1], bwd[1]])))
+    assert torch.equal(losses["id"], identity_loss(*P.vector(0, 0)))
+    assert torch.equal(losses["cyc"], cycle_loss(P.T(1, -1, input=(-1, 1)), fwd[1], P.T(0, -1, input=(-1, 0))))
+    # ... and no random draw for a subset: the RNG stream is that of a model without constraints.
+    plain = PoseConsModel(make_config())
+    torch.manual_seed(7)
+    plain(batch)
+    assert torch.equal(torch.get_rng_state(), rng_after)
+
+
+@pytest.mark.parametrize("b,fraction", [(4, 0.5), (3, 0.2)])
+def test_constraints_on_a_subset_do_not_change_the_warping_poses_or_running_statistics(b, fraction):
+    torch.manual_seed(3)
+    plain, constrained = (
+        PoseConsModel(make_config()),
+        PoseConsModel(make_config(ALL, **{"loss.constraint_fraction": fraction})),
+    )
+    constrained.load_state_dict(plain.state_dict())
+    batch = random_batch(b=b)
+    out_plain, _ = plain(batch)
+    out_constrained, _ = constrained(batch)
+    for f in (-1, 1):
+        assert torch.allclose(out_plain["poses"][f], out_constrained["poses"][f], atol=1e-6)
+    for (name, buf), other in zip(plain.pose_net.named_buffers(), constrained.pose_net.buffers()):
+        assert torch.allclose(buf.float(), other.float(), atol=1e-6), name
+
+
+def test_constraint_losses_are_means_over_the_drawn_subset():
+    torch.manual_seed(6)
+    model = PoseConsModel(make_config(ALL, **{"loss.constraint_fraction": 0.5}))
+    by_hand = copy.deepcopy(model)
+    drawn, draw = [], model.constraint_samples
+    model.constraint_samples = lambda n, device: drawn.append(draw(n, device)) or drawn[-1]
+    batch = random_batch(b=4)
+    _, losses = model(batch)
+    (sub,) = drawn  # one draw per step, shared by the three constraints
+    assert len(sub) == 2 and not torch.equal(sub, torch.arange(2))  # a subset the test can tell from the first k
+
+    def pose(i: int, j: int, rows) -> torch.Tensor:  # T_{j←i} from its own pose-net call on the samples `rows`
+        index = (0, -1, 1)
+        return pose_vec_to_mat(
+            *by_hand.pose_net(batch["frames"][rows, index.index(i)], batch["frames"][rows, index.index(j)])
+        )
+
+    everyone = slice(None)
+    fwd = {-1: invert_pose(pose(-1, 0, everyone))[sub], 1: pose(0, 1, everyone)[sub]}  # T_{f←0}, whole-batch BN
+    bwd = {-1: invert_pose(pose(0, -1, sub)), 1: pose(1, 0, sub)}  # T_{0←f} from the reversed pairs
+    fb = (pose_distance(fwd[-1], invert_pose(bwd[-1])).mean() + pose_distance(fwd[1], invert_pose(bwd[1])).mean()) / 2
+    aa, t = by_hand.pose_net(batch["frames"][sub, 0], batch["frames"][sub, 0])
+    cyc = pose_distance(pose(-1, 1, sub), fwd[1] @ invert_pose(fwd[-1])).mean()
+    assert torch.allclose(losses["fb"], fb, rtol=1e-4, atol=1e-7)
+    assert torch.allclose(losses["id"], (aa.abs().sum((1, 2)) + t.abs().sum((1, 2))).mean(), rtol=1e-4, atol=1e-7)
+    assert torch.allclose(losses["cyc"], cyc, rtol=1e-4, atol=1e-7)
+
+
+@pytest.mark.parametrize(
+    "b,fraction,k", [(1, 0.5, 1), (1, 1e-9, 1), (12, 1e-9, 1), (12, 0.5, 6), (12, 0.3, 4), (3, 0.5, 2), (12, 1.0, 12)]
+)
+def test_constraint_sample_count_and_draws(b, fraction, k):
+    assert constraint_sample_count(b, fraction) == k  # max(1, round(f·B)): 0.3·12 = 3.6 → 4, 1.5 → 2
+    model = PoseConsModel(make_config(ALL, **{"loss.constraint_fraction": fraction}))
+    torch.manual_seed(11)
+    draws = [model.constraint_samples(b, torch.device("cpu")) for _ in range(6)]
+    if fraction == 1.0:
+        assert draws == [slice(None)] * 6
+        return
+    for sub in draws:  # k distinct samples of the batch, sorted
+        assert len(sub) == k and sub.unique().tolist() == sub.tolist() and 0 <= sub.min() and sub.max() < b
+    torch.manual_seed(11)  # reproducible from torch's generator (saved in checkpoints)
+    assert all(torch.equal(x, model.constraint_samples(b, torch.device("cpu"))) for x in draws)
+    if 1 < k < b:
+        assert any(not torch.equal(draws[0], x) for x in draws[1:])  # a new subset each step

@@ -93,13 +93,13 @@ def test_constraint_groups_can_use_the_temporal_groups_statistics():
     bn = networks.GroupedBatchNorm2d(4).train()
     nn.init.uniform_(bn.weight, 0.5, 2)
     nn.init.uniform_(bn.bias, -1, 1)
-    bn.groups, bn.tracked, bn.reference = 3, 2, "temporal"
+    bn.sizes, bn.tracked, bn.reference = (2, 2, 2), 2, "temporal"
     x = torch.randn(6, 4, 5, 7) * 3 + 1
     out = bn(x)
     # The temporal groups are normalised on their own, as in "own" mode ...
     own = networks.GroupedBatchNorm2d(4).train()
     own.load_state_dict(bn.state_dict())
-    own.groups, own.tracked = 3, 2
+    own.sizes, own.tracked = (2, 2, 2), 2
     assert torch.allclose(out[:4], own(x)[:4], atol=1e-6)
     # ... and the constraint group with the mean and biased variance of both temporal groups together.
     pooled = x[:4].transpose(0, 1).flatten(1)
@@ -123,3 +123,45 @@ def test_pose_decoder_scales_its_output_by_exactly_0_01():
     aa, t = dec(torch.rand(2, 512, 2, 3))
     assert torch.equal(aa, 0.01 * torch.tensor([1.0, 2, 3]).expand(2, 1, 3))
     assert torch.equal(t, 0.01 * torch.tensor([4.0, 5, 6]).expand(2, 1, 3))
+
+
+def test_group_sizes_equal_to_a_number_of_groups_give_bit_identical_outputs_and_statistics():
+    torch.manual_seed(2)
+    by_count, by_sizes = PoseNet(10), PoseNet(10)
+    by_sizes.load_state_dict(by_count.state_dict())
+    a, b = torch.rand(6, 3, 64, 96), torch.rand(6, 3, 64, 96)
+    for x, y in zip(by_count(a, b, groups=3, tracked=2), by_sizes(a, b, groups=[2, 2, 2], tracked=2)):
+        assert torch.equal(x, y)
+    for x, y in zip(by_count.buffers(), by_sizes.buffers()):
+        assert torch.equal(x, y)
+
+
+def test_groups_of_different_sizes_equal_separate_calls():
+    torch.manual_seed(4)
+    # One BatchNorm layer: exactly what a separate call per group computes, only tracked groups counted.
+    bn, ref = networks.GroupedBatchNorm2d(4), torch.nn.BatchNorm2d(4)
+    bn.sizes, bn.tracked = (3, 1, 2), 1
+    x = torch.randn(6, 4, 5, 7) * 3 + 1
+    out = bn(x)
+    assert torch.equal(out[:3], ref(x[:3]))
+    for lo, hi in ((3, 4), (4, 6)):  # untracked groups: their own batch statistics, no running update
+        assert torch.equal(out[lo:hi], torch.nn.functional.batch_norm(x[lo:hi], None, None, bn.weight, bn.bias, True))
+    assert torch.equal(bn.running_mean, ref.running_mean) and torch.equal(bn.running_var, ref.running_var)
+    assert int(bn.num_batches_tracked) == 1
+    # The whole pose net: temporal groups of 3 (tracked, one after the other) and constraint groups of 1.
+    batched, separate = PoseNet(10), PoseNet(10)
+    separate.load_state_dict(batched.state_dict())
+    a, b = torch.rand(8, 3, 64, 96), torch.rand(8, 3, 64, 96)
+    sizes = [3, 3, 1, 1]
+    aa, t = batched(a, b, groups=sizes, tracked=2)
+    singles = [separate(a[:3], b[:3]), separate(a[3:6], b[3:6])]
+    for g in (6, 7):  # untracked: a separate call on a fresh copy that has seen both temporal groups
+        other = PoseNet(10)
+        other.load_state_dict(separate.state_dict())
+        singles.append(other(a[g : g + 1], b[g : g + 1]))
+    assert torch.allclose(aa, torch.cat([s[0] for s in singles]), atol=1e-6)
+    assert torch.allclose(t, torch.cat([s[1] for s in singles]), atol=1e-6)
+    for (name, buf), other in zip(batched.named_buffers(), separate.buffers()):
+        assert torch.allclose(buf.float(), other.float(), atol=1e-6), name
+    with pytest.raises(ValueError, match="8 pairs does not split into groups of sizes \\[3, 3, 1\\]"):
+        batched(a, b, groups=[3, 3, 1])

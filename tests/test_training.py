@@ -225,7 +225,9 @@ def final_weights(run: Path) -> dict:
 
 def test_killed_run_resumes_to_identical_weights(synth_data, tmp_path):
     args = ["train", "--config", str(tmp_path / "c.yaml"), "--data-path", str(synth_data), "--quiet"]
-    (tmp_path / "c.yaml").write_text("loss:\n  constraints: [fb, id, cyc]\n  identity_fraction: 0.5\n")
+    (tmp_path / "c.yaml").write_text(
+        "loss:\n  constraints: [fb, id, cyc]\n  identity_fraction: 0.5\n  constraint_fraction: 0.5\n"
+    )
     sets = sum(
         [
             ["--set", s]

@@ -13,7 +13,7 @@ import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Union
+from typing import Any, Optional, Union
 
 import yaml
 
@@ -38,6 +38,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     ),
     "loss.ssim_weight": _FRACTION,
     "loss.identity_fraction": _FRACTION,
+    "loss.constraint_fraction": (lambda v: 0 < v <= 1, "must be in (0, 1]"),
     "loss.smoothness_weight": _at_least(0),
     "loss.fb_weight": _at_least(0),
     "loss.id_weight": _at_least(0),
@@ -93,6 +94,9 @@ class LossConfig:
     cyc_weight: float = 0.1
     constraint_start_step: int = 0  # the authors' released code waited 2000 steps
     identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
+    # Share of each batch's samples that get the constraint pairs, in (0, 1]: k = max(1, round(f·B))
+    # drawn per step (the same for every constraint); 1.0 = the whole batch, as the paper.
+    constraint_fraction: float = 1.0
     translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
     # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
     # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was
@@ -108,6 +112,9 @@ class DataConfig:
     flip_prob: float = 0.5  # probability in [0, 1]
     jitter_prob: float = 0.5
     num_workers: int = 2  # DataLoader worker processes; 0 loads in the training process
+    # Folder written by `posecons cache` for this config (same size, data path and splits): the loader
+    # reads its resized frames instead of decoding the images; null: decode the images.
+    cache_dir: Optional[str] = None
     # Drop split lines whose frames (model.frame_ids) are not all on disk, printing how many, instead
     # of stopping at the first: e.g. frame offsets ±3 on a split made for ±1 near drive ends.
     skip_incomplete: bool = False

@@ -148,7 +148,8 @@ def backproject(depth: torch.Tensor, K: torch.Tensor) -> torch.Tensor:
     check_tensor("depth", depth, (None, 1, None, None))
     check_tensor("K", K, (depth.shape[0], 3, 3))
     _, _, h, w = depth.shape
-    rays = torch.linalg.inv(K) @ pixel_grid(h, w, depth)
+    # inv_ex: the same inverse as linalg.inv without its error check, which on CUDA waits for the device.
+    rays = torch.linalg.inv_ex(K).inverse @ pixel_grid(h, w, depth)
     return rays * depth.view(depth.shape[0], 1, -1)
 
 

@@ -5,6 +5,7 @@ with four sigmoid disparity scales, and a small pose decoder.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from urllib.error import URLError
 
 import torch
@@ -58,25 +59,27 @@ def imagenet_weights_name(num_layers: int) -> str:
 
 
 class GroupedBatchNorm2d(nn.BatchNorm2d):
-    """BatchNorm2d that, in training, normalises each of ``groups`` equal chunks of the batch on
-    its own and lets only the first ``tracked`` chunks update the running statistics, one after
-    the other — what separate calls per chunk would do, in one pass of the surrounding network.
+    """BatchNorm2d that, in training, normalises each group of consecutive samples (``sizes``, a
+    tuple summing to the batch) on its own and lets only the first ``tracked`` groups update the
+    running statistics, one after the other — what separate calls per group would do, in one pass
+    of the surrounding network.
 
     The pose net sees every pair of a step in one batch (temporal pairs first, then the
     constraints' reversed, identity and skip pairs): grouping keeps the constraint pairs from
     changing the warping poses, and tracking only the temporal pairs keeps them out of the
-    statistics used at evaluation. In eval mode it is a plain BatchNorm2d.
+    statistics used at evaluation. Groups may differ in size (the constraints of
+    ``loss.constraint_fraction`` < 1 see a subset of the batch). In eval mode it is a plain BatchNorm2d.
     """
 
-    groups: int = 1
+    sizes: tuple[int, ...] = ()  # () or one group: the whole batch
     tracked: int = 1
     reference: str = "own"
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if not self.training or self.groups == 1:
+        if not self.training or len(self.sizes) <= 1:
             return super().forward(x)
         out = []
-        chunks = x.chunk(self.groups)
+        chunks = x.split(self.sizes)
         if self.reference == "temporal":  # constraint groups see the tracked groups' batch statistics
             ref = torch.cat(chunks[: self.tracked]).float()
             var, mean = torch.var_mean(ref, (0, 2, 3), correction=0)
@@ -239,14 +242,24 @@ class PoseNet(nn.Module):
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
     def forward(
-        self, image_a: torch.Tensor, image_b: torch.Tensor, groups: int = 1, tracked: int | None = None
+        self,
+        image_a: torch.Tensor,
+        image_b: torch.Tensor,
+        groups: int | Sequence[int] = 1,
+        tracked: int | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """In training, ``groups`` equal chunks of the batch get their own BatchNorm statistics and
-        the first ``tracked`` (default all) update the running ones (see GroupedBatchNorm2d)."""
-        if image_a.shape[0] % groups:
-            raise ValueError(f"batch of {image_a.shape[0]} pairs does not split into {groups} equal groups")
+        """In training, each group of the batch gets its own BatchNorm statistics and the first
+        ``tracked`` (default all) update the running ones (see GroupedBatchNorm2d). ``groups``:
+        a number of equal groups, or the sizes of consecutive groups."""
+        n = image_a.shape[0]
+        if isinstance(groups, int):
+            if n % groups:
+                raise ValueError(f"batch of {n} pairs does not split into {groups} equal groups")
+            groups = [n // groups] * groups
+        if sum(groups) != n or min(groups) < 1:
+            raise ValueError(f"batch of {n} pairs does not split into groups of sizes {list(groups)}")
         for bn in self.encoder.modules():
             if isinstance(bn, GroupedBatchNorm2d):
-                bn.groups, bn.tracked = groups, groups if tracked is None else tracked
+                bn.sizes, bn.tracked = tuple(groups), len(groups) if tracked is None else tracked
                 bn.reference = self.constraint_norm
         return self.decoder(self.encoder(torch.cat([image_a, image_b], 1))[-1])

@@ -36,9 +36,10 @@ def color_jitter(frames: torch.Tensor, params: torch.Tensor) -> torch.Tensor:
     identity params (1, 1, 1, 0) are returned unchanged.
     """
     out = frames.clone()
-    identity = torch.tensor(IDENTITY_JITTER, dtype=params.dtype, device=params.device)
-    for b in torch.nonzero((params != identity).any(dim=1)).flatten().tolist():
-        brightness, contrast, saturation, hue = params[b].tolist()
+    for b, factors in enumerate(params.tolist()):  # one copy to the host, not one per sample
+        if tuple(factors) == IDENTITY_JITTER:
+            continue
+        brightness, contrast, saturation, hue = factors
         x = TF.adjust_brightness(frames[b], brightness)
         x = TF.adjust_contrast(x, contrast)
         x = TF.adjust_saturation(x, saturation)

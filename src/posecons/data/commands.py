@@ -1,4 +1,4 @@
-"""Data sub-commands of the ``posecons`` CLI: synth, export-gt, prepare, build-split."""
+"""Data sub-commands of the ``posecons`` CLI: synth, export-gt, prepare, cache, build-split."""
 
 from __future__ import annotations
 
@@ -75,6 +75,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.set_defaults(func=_prepare)
 
+    p = subparsers.add_parser(
+        "cache",
+        help="decode and resize once every frame a config's train and val splits need (data.cache_dir)",
+        description="Write the frames that `posecons train` with the same --config/--set/--split-dir "
+        "reads, resized to model.height×model.width exactly as the loader does; train with "
+        "--set data.cache_dir=CACHE. An interrupted build is finished by the same command.",
+    )
+    p.add_argument("--data-path", type=Path, required=True, help="dataset root (KITTI raw layout, or odometry root)")
+    p.add_argument("--config", required=True, help="preset file or bundled name (e.g. kitti/cycle)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value as for train, e.g. --set model.height=96 (repeatable)",
+    )
+    p.add_argument("--split-dir", type=Path, help="folder with train_files.txt/val_files.txt (as for train)")
+    p.add_argument(
+        "--out", type=output_folder, required=True, help="cache folder: new, empty, or an unfinished cache to complete"
+    )
+    p.add_argument("--workers", type=positive_int, default=None, help="decoding processes (default: up to 2)")
+    p.set_defaults(func=_cache)
+
     p = subparsers.add_parser("build-split", help="build a Zhou-style train/val split from a KITTI raw tree")
     p.add_argument("--data-path", type=Path, required=True, help="KITTI raw root")
     p.add_argument("--out", type=output_folder, required=True, help="directory for train_files.txt and val_files.txt")
@@ -129,6 +153,23 @@ def _prepare(args: argparse.Namespace) -> int:
     info = prepare(args.input, args.out, k, args.width, args.height, args.static_threshold)
     print(
         f"wrote {len(info['drives'])} drives ({sum(info['frames'])} frames; {info['train']} train / {info['val']} val lines) to {args.out}"
+    )
+    return 0
+
+
+def _cache(args: argparse.Namespace) -> int:
+    import os
+
+    from ..config import load_config, resolve_preset
+    from .cache_build import build_cache
+
+    config = load_config(resolve_preset(args.config), args.overrides)
+    workers = args.workers or min(2, os.cpu_count() or 1)
+    info = build_cache(config, args.data_path, args.out, args.split_dir, workers)
+    size = info["frames"] * info["bytes_per_frame"] / 1e9
+    print(
+        f"{args.out}: {info['frames']} frames at {info['width']}×{info['height']} ({info['written']} written now, "
+        f"{size:.2f} GB); train with --set data.cache_dir={args.out}"
     )
     return 0
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from ..config import Config
 from ..errors import PoseconsError
+from .cache import open_cache
 from .frames import FrameDataset
 from .kitti_odometry import KittiOdometryDataset
 from .kitti_raw import KittiRawDataset
@@ -33,7 +34,11 @@ def split_files(config: Config, data_path: str | Path, split_dir: str | Path | N
 
 
 def build_dataset(config: Config, data_path: str | Path, split_file: Path, train: bool) -> FrameDataset:
+    """The training (``train=True``: augmented) or validation dataset of ``split_file``, reading
+    its frames from ``data.cache_dir`` when that is set (checked to fit this config and split)."""
     m, d = config.model, config.data
+    role = "train" if train else "val"
+    cache = open_cache(d.cache_dir, config, data_path, split_file, role) if d.cache_dir else None
     cls = KittiOdometryDataset if d.dataset == "kitti_odom" else KittiRawDataset
     return cls(
         data_path,
@@ -48,4 +53,5 @@ def build_dataset(config: Config, data_path: str | Path, split_file: Path, train
         jitter_prob=d.jitter_prob,
         seed=config.train.seed,
         skip_incomplete=d.skip_incomplete,
+        cache=cache,
     )

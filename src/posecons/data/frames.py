@@ -5,6 +5,9 @@ Sample contract (the model relies on it):
     ``intrinsics`` float32 (3, 3) K normalised by image size, mirrored when flipped (``flip_intrinsics``);
     ``color_aug``  float32 (4,) jitter factors (b, c, s, h), (1, 1, 1, 0) when not drawn;
     ``index`` int, ``folder`` str, ``frame`` int, ``side`` str.
+
+With a frame cache (:mod:`.cache`) the resized pixels come from it instead of the image files;
+everything else, and every value of the sample, is the same.
 """
 
 from __future__ import annotations
@@ -21,8 +24,9 @@ from torch.utils.data import Dataset
 from ..errors import PoseconsError
 from ..geometry import flip_intrinsics
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
+from .cache import FrameCache
 from .calib import KITTI_FIXED_K
-from .io import load_rgb, resize_rgb
+from .io import image_suffix, load_rgb, resize_uint8, to_float
 from .splits import SplitLine, SplitSource, read_split
 
 
@@ -32,7 +36,9 @@ class FrameDataset(Dataset):
     ``split``: a split file or its lines; ``frame_ids``: offsets to load (target first);
     ``train=False`` disables augmentation; ``calib_intrinsics=False`` uses KITTI's fixed K
     (fx=0.58, fy=1.92, cx=cy=0.5); augmentation draws depend only on (seed, epoch, index);
-    ``check_files`` stats every needed image up front so a bad split fails before training.
+    ``check_files`` stats every needed image (and cached frame) up front so a bad split fails
+    before training; ``cache``: a :class:`~posecons.data.cache.FrameCache` to read the resized
+    frames from.
     """
 
     def __init__(
@@ -50,18 +56,20 @@ class FrameDataset(Dataset):
         seed: int = 0,
         check_files: bool = True,
         skip_incomplete: bool = False,
+        cache: FrameCache | None = None,
     ) -> None:
         self.data_path = Path(data_path)
         self.lines: list[SplitLine] = read_split(split)
         self.height, self.width = int(height), int(width)
         self.frame_ids = tuple(int(f) for f in frame_ids)
-        self.img_ext = img_ext if img_ext.startswith(".") else f".{img_ext}"
+        self.img_ext = image_suffix(img_ext)
         self.train = train
         self.calib_intrinsics = calib_intrinsics
         self.flip_prob, self.jitter_prob = (flip_prob, jitter_prob) if train else (0.0, 0.0)
         self.seed = seed
         self.epoch = 0
         self.skip_incomplete = skip_incomplete
+        self.cache = cache
         if check_files:
             self.check_files()
         self._first = {(line.folder, line.side): line for line in reversed(self.lines)}  # first line per camera
@@ -102,6 +110,14 @@ class FrameDataset(Dataset):
             self.lines = complete
             if not complete:
                 raise PoseconsError(f"{source}: no line has all of its frames {list(self.frame_ids)}")
+        for line in self.lines if self.cache is not None else []:
+            for o in self.frame_ids:
+                cached = self.cache.file(self.image_path(line, line.frame + o))
+                if not cached.is_file():
+                    raise PoseconsError(
+                        f"{line.where}: frame {line.frame}{o:+d} of '{line}' is not in the frame cache "
+                        f"{self.cache.folder} ({cached} missing); build the cache again with `posecons cache`"
+                    )
 
     def intrinsics(self, line: SplitLine) -> np.ndarray:
         """Normalised (3, 3) K: the calibrated one, or KITTI's fixed K when calibration is off."""
@@ -129,9 +145,14 @@ class FrameDataset(Dataset):
         return len(self.lines)
 
     def load_frame(self, path: Path, flip: bool, like: tuple[Path, tuple[int, int]] | None = None) -> torch.Tensor:
-        """Decode and resize exactly as evaluation and inference do (``resize_rgb``), then flip:
-        (3, H, W) float32 in [0, 1]; ``like``: see :func:`~posecons.data.io.load_rgb`."""
-        image = torch.from_numpy(resize_rgb(np.asarray(load_rgb(path, like=like)), self.height, self.width))
+        """Decode and resize exactly as evaluation and inference do (``resize_rgb``), or read what
+        the cache holds of that, then flip: (3, H, W) float32 in [0, 1]; ``like``: see
+        :func:`~posecons.data.io.load_rgb`."""
+        if self.cache is not None:
+            pixels = self.cache.load(path)
+        else:
+            pixels = resize_uint8(np.asarray(load_rgb(path, like=like)), self.height, self.width)
+        image = torch.from_numpy(to_float(pixels))
         return image.flip(-1) if flip else image
 
     def __getitem__(self, index: int) -> dict:
@@ -140,7 +161,7 @@ class FrameDataset(Dataset):
             flip, jitter = draw_augmentation(sample_rng(self.seed, self.epoch, index), self.flip_prob, self.jitter_prob)
         else:
             flip, jitter = False, np.array(IDENTITY_JITTER, dtype=np.float32)
-        like = self.reference_size(line)
+        like = None if self.cache is not None else self.reference_size(line)  # the cache build checked sizes
         frames = torch.stack(
             [self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids]
         )

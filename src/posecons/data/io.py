@@ -17,6 +17,11 @@ def require_file(path: Path, what: str) -> Path:
     return path
 
 
+def image_suffix(ext: str) -> str:
+    """An image extension with its dot: "png" → ".png"."""
+    return ext if ext.startswith(".") else f".{ext}"
+
+
 def load_rgb(path: Path, like: tuple[Path, tuple[int, int]] | None = None) -> Image.Image:
     """Open an image file as an RGB PIL image (decoded now, so errors surface here).
 
@@ -45,8 +50,20 @@ def load_velodyne(path: Path) -> np.ndarray:
     return np.fromfile(path, dtype="<f4").reshape(-1, 4)
 
 
+RESIZE = "PIL bilinear (antialiased when shrinking) to uint8"  # what resize_uint8 does, for cache manifests
+
+
+def resize_uint8(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(H, W, 3) uint8 → (height, width, 3) uint8, resized like the training data (:data:`RESIZE`)."""
+    return np.asarray(Image.fromarray(image).resize((width, height), Image.BILINEAR))
+
+
+def to_float(image: np.ndarray) -> np.ndarray:
+    """(h, w, 3) uint8 → (3, h, w) float32 in [0, 1]."""
+    return np.asarray(image, dtype=np.float32).transpose(2, 0, 1) / 255.0
+
+
 def resize_rgb(image: np.ndarray, height: int, width: int) -> np.ndarray:
     """(H, W, 3) uint8 → (3, height, width) float32 in [0, 1], resized like the training data
     (PIL bilinear, antialiased when shrinking)."""
-    img = Image.fromarray(image).resize((width, height), Image.BILINEAR)
-    return np.asarray(img, dtype=np.float32).transpose(2, 0, 1) / 255.0
+    return to_float(resize_uint8(image, height, width))

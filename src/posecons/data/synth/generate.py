@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import io
 import json
-import multiprocessing
 import os
 import shutil
-import signal
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -31,6 +29,7 @@ from ...errors import PoseconsError
 from ...fileio import output_dir
 from ..calib import format_calib
 from ..oxts import DATAFORMAT, format_oxts, poses_to_oxts
+from ..parallel import fork_map
 from ..splits import SplitLine, write_split
 from ..trajectory_io import write_kitti_poses
 from .motion import Trajectory, extended_path, make_trajectory
@@ -257,18 +256,6 @@ def _render_drive(job: _Job, frames: int, workers: int) -> None:
     global _JOB
     _JOB = job
     try:
-        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            # Ctrl-C reaches the whole process group: the workers are forked with it blocked (a worker
-            # that died of it would hang the pool), the parent receives it once they exist and stops them.
-            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-            try:
-                pool = multiprocessing.get_context("fork").Pool(workers)
-            finally:
-                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-            with pool:
-                pool.map(_render_frame, range(frames), chunksize=max(1, frames // (4 * workers)))
-        else:
-            for frame in range(frames):
-                _render_frame(frame)
+        fork_map(_render_frame, range(frames), workers)
     finally:
         _JOB = None
