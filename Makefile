@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench
+.PHONY: demo study test lint bench
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -14,6 +14,10 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/posecons demo --out runs/demo
+
+# Hours on a CPU; rerun it to continue after an interruption (docs/study.md).
+study: $(STAMP)
+	$(BIN)/posecons study --spec study/synth --out runs/study
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

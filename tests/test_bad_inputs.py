@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import yaml
 from PIL import Image
 
 from posecons.checkpoint import save_checkpoint
@@ -28,6 +29,20 @@ TRAIN = "train --config kitti/baseline --data-path {syn} --out {out} --quiet " +
     f"--set {s}" for s in TINY + ["data.split=synth", "train.batch_size=2", "data.num_workers=0", "train.max_steps=1"]
 )
 DRIVE = "2020_01_01/2020_01_01_drive_0000_sync"
+STUDY_SPEC = {
+    "preset": "synth/demo",
+    "data": {"synth": {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}},
+    "seeds": [0],
+    "variants": {"a": []},
+}
+STUDY_SPECS = {  # spec file name → what differs from STUDY_SPEC
+    "study_unknown_key": {"variantz": {}},
+    "study_no_seeds": {"seeds": []},
+    "study_no_variants": {"variants": {}},
+    "study_bad_variant": {"variants": {"a": [], "b": ["loss.constraints=[xyz]"]}},
+    "study_bad_synth": {"data": {"synth": {**STUDY_SPEC["data"]["synth"], "drives": 1}}},
+    "study_two_data": {"data": {**STUDY_SPEC["data"], "path": "/data/kitti_raw"}},
+}
 
 
 def _hash(*roots: Path) -> str:
@@ -76,6 +91,8 @@ def world(make_synth, tmp_path_factory) -> dict[str, Path]:
     (inp / "two_times.txt").write_text("0\n0.1\n")
     (inp / "static.txt").write_text("2011_09_26 drive_0001 not-a-frame\n")
     (inp / "result.json").write_text('{"abs_rel": 0.1}')
+    for name, change in STUDY_SPECS.items():
+        (inp / f"{name}.yaml").write_text(yaml.safe_dump({**STUDY_SPEC, **change}))
     assert (
         main(
             [
@@ -297,6 +314,50 @@ CASES = [
     ("compare-missing", "compare {in}/nope.json", ["nope.json: no such evaluation JSON"]),
     ("compare-not-depth", "compare {in}/result.json", ["result.json: not a depth evaluation"]),
     ("compare-out-under-file", "compare {in}/result.json --out {in}/blocker/t.md", ["--out", "blocker is a file"]),
+    # study
+    ("study-spec-missing", "study --spec {in}/nope.yaml --out {out}", ["nope.yaml", "neither a file nor a bundled"]),
+    (
+        "study-spec-unknown-key",
+        "study --spec {in}/study_unknown_key.yaml --out {out}",
+        ["study_unknown_key.yaml: unknown key 'variantz'"],
+    ),
+    (
+        "study-spec-no-seeds",
+        "study --spec {in}/study_no_seeds.yaml --out {out}",
+        ["study_no_seeds.yaml: seeds must be a non-empty"],
+    ),
+    (
+        "study-spec-no-variants",
+        "study --spec {in}/study_no_variants.yaml --out {out}",
+        ["study_no_variants.yaml: variants must be a non-empty"],
+    ),
+    (
+        "study-spec-bad-variant-config",
+        "study --spec {in}/study_bad_variant.yaml --out {out}",
+        ["study_bad_variant.yaml: variant 'b'", "loss.constraints: unknown ['xyz']"],
+    ),
+    (
+        "study-spec-bad-synth",
+        "study --spec {in}/study_bad_synth.yaml --out {out}",
+        ["study_bad_synth.yaml", "at least 2 drives"],
+    ),
+    (
+        "study-spec-two-data",
+        "study --spec {in}/study_two_data.yaml --out {out}",
+        ["study_two_data.yaml: data: give either"],
+    ),
+    ("study-kitti-without-data", "study --spec study/kitti_gpu --out {out}", ["kitti_gpu.yaml", "--data-path"]),
+    (
+        "study-out-under-file",
+        "study --spec {in}/study_no_seeds.yaml --out {in}/blocker/s",
+        ["--out", "blocker is a file"],
+    ),
+    ("study-report-only-nothing", "study --report-only --report {out}/r.md", ["--report-only needs --results"]),
+    (
+        "study-report-only-not-a-study",
+        "study --report-only --results {in}/userdir --report {out}/r.md",
+        ["userdir: no study.json"],
+    ),
     # predict
     (
         "predict-out-foreign-folder",

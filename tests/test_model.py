@@ -305,6 +305,7 @@ def test_depth_consistency_runs_one_depth_pass_over_all_frames_only_when_on():
         assert torch.allclose(out_on["disp"][s], out_off["disp"][s], atol=1e-6)
     assert loss_on["photometric"].item() == pytest.approx(loss_off["photometric"].item(), rel=1e-5)
 
+
 def test_constraint_fraction_one_is_the_whole_batch_bit_for_bit():
     torch.manual_seed(3)
     model = PoseConsModel(make_config(ALL))

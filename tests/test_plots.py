@@ -19,6 +19,16 @@ def test_every_figure_is_written(tmp_path):
         plots.plot_trajectory_topview(poses, tmp_path / "traj_gt.png", gt=poses, label="aligned"),
         plots.plot_validation(rows, tmp_path / "val.png"),
         plots.plot_scale_drift(np.arange(4), np.array([1.0, 1.1, 0.9, 1.0]), 1.0, np.arange(2), tmp_path / "drift.png"),
+        plots.plot_scale_boxplots({"a": scales, "b": scales[::-1]}, seqs, tmp_path / "boxes.png", normalise=True),
+        plots.plot_scales_over_time({"a": scales, "b": scales}, seqs, [0, 1, 2, 0, 1, 2], tmp_path / "t2.png", 1, True),
+        plots.plot_paired_differences(
+            [
+                {"metric": m, "variant": v, "mean": 0.1, "low": -0.1, "high": 0.3}
+                for m in ("abs rel", "σ/μ", "ATE", "δ")
+                for v in ("a", "b")
+            ],
+            tmp_path / "paired.png",
+        ),
     ]
     assert all(path.stat().st_size > 1000 for path in written)
 

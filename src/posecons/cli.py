@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "posecons.training.commands",
     "posecons.evaluation.commands",
     "posecons.inference.commands",
+    "posecons.study.commands",
 )
 
 

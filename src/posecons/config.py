@@ -21,6 +21,7 @@ from .errors import PoseconsError
 
 CONSTRAINTS = ("fb", "id", "cyc")
 PRESETS = Path(__file__).resolve().parent / "configs"  # bundled presets; the repository's configs/ links here
+STUDY_SPECS = PRESETS / "study"  # bundled `posecons study` specs (study/NAME), which are not training presets
 
 
 def _at_least(low: float) -> tuple:
@@ -292,14 +293,15 @@ def resolve_preset(name: str | Path) -> Path:
         return path
     name = str(name)
     bundled = PRESETS / (name if name.endswith(".yaml") else f"{name}.yaml")
-    if bundled.is_file():
+    if bundled.is_file() and STUDY_SPECS not in bundled.parents:
         return bundled
     raise PoseconsError(f"config {name!r} is neither a file nor a bundled preset ({', '.join(preset_names())})")
 
 
 def preset_names() -> list[str]:
     """Names of the bundled presets, e.g. ``kitti/cycle``."""
-    return sorted(str(p.relative_to(PRESETS).with_suffix("")) for p in PRESETS.rglob("*.yaml"))
+    files = [p for p in PRESETS.rglob("*.yaml") if STUDY_SPECS not in p.parents]
+    return sorted(str(p.relative_to(PRESETS).with_suffix("")) for p in files)
 
 
 def parse_override(item: str) -> dict[str, Any]:

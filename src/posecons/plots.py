@@ -1,6 +1,6 @@
 """Every figure of the package (PNG files, matplotlib Agg): evaluation (frame scales per sequence,
-scale over time for the least consistent sequences as in the paper's Figure 1, the per-frame abs rel
-histogram), training (validation curves), prediction (colour-mapped disparity, scale drift) and the
+scale over time for the least consistent sequences as in the paper's Figure 1, for one run or
+several side by side, the per-frame abs rel histogram), studies (paired differences), training (validation curves), prediction (colour-mapped disparity, scale drift) and the
 top view of a trajectory. Nothing else in the package imports matplotlib."""
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ def _save(fig: plt.Figure, path: str | Path) -> Path:
     return path
 
 
-def _short(name: str) -> str:
-    """'2011_09_26/2011_09_26_drive_0002_sync' → '09_26_0002' for axis labels."""
+def short_name(name: str) -> str:
+    """'2011_09_26/2011_09_26_drive_0002_sync' → '09_26_0002' for axis labels and table columns."""
     base = name.rstrip("/").split("/")[-1]
     parts = base.split("_")
     return f"{parts[1]}_{parts[2]}_{parts[4]}" if len(parts) >= 5 and parts[3] == "drive" else base
@@ -42,15 +42,41 @@ def _by_sequence(scales: Sequence[float], sequences: Sequence[str]) -> dict[str,
     return {name: idx for name, idx in groups.items() if idx.size}
 
 
+def _runs(runs: dict[str, Sequence[float]], normalise: bool) -> dict[str, np.ndarray]:
+    """Each run's (N,) scales, divided by their median over all frames with ``normalise``: runs of a
+    monocular network have arbitrary scales of their own, and only the spread is comparable."""
+    arrays = {label: np.asarray(scales, dtype=np.float64) for label, scales in runs.items()}
+    return {label: a / np.nanmedian(a) for label, a in arrays.items()} if normalise else arrays
+
+
 def plot_scale_boxplot(scales: Sequence[float], sequences: Sequence[str], path: str | Path) -> Path:
     """Box plot of the per-frame median scales (N,) of each sequence."""
-    scales = np.asarray(scales, dtype=np.float64)
-    groups = _by_sequence(scales, sequences)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.35 * len(groups) + 2), 4))
-    ax.boxplot([scales[idx] for idx in groups.values()])
-    ax.set_xticks(range(1, len(groups) + 1), [_short(n) for n in groups], rotation=90, fontsize=7)
-    ax.set_ylabel("median scale  median(gt) / median(pred)")
+    return plot_scale_boxplots({"": scales}, sequences, path)
+
+
+def plot_scale_boxplots(
+    runs: dict[str, Sequence[float]], sequences: Sequence[str], path: str | Path, normalise: bool = False
+) -> Path:
+    """Per-frame median scales of each sequence, one box per run (label → (N,) scales of the same N
+    frames, NaN = skipped) side by side; ``normalise`` divides each run's scales by their median."""
+    arrays = _runs(runs, normalise)
+    scored = np.isfinite(np.stack(list(arrays.values()))).any(axis=0)  # frames with a scale in some run
+    groups = _by_sequence(np.where(scored, 1.0, np.nan), sequences)
+    width = 0.8 / len(arrays)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.35 * len(groups) * len(arrays) + 2), 4))
+    for k, (label, scales) in enumerate(arrays.items()):
+        data = [scales[idx][np.isfinite(scales[idx])] for idx in groups.values()]
+        positions = np.arange(1, len(groups) + 1) + (k - (len(arrays) - 1) / 2) * width
+        boxes = ax.boxplot(data, positions=positions, widths=0.9 * width, patch_artist=bool(label))
+        if label:
+            for box in boxes["boxes"]:
+                box.set_facecolor(f"C{k}")
+            boxes["boxes"][0].set_label(label)
+    ax.set_xticks(range(1, len(groups) + 1), [short_name(n) for n in groups], rotation=90, fontsize=7)
+    ax.set_ylabel("scale / median scale of the run" if normalise else "median scale  median(gt) / median(pred)")
     ax.set_title("Per-frame scale by sequence")
+    if any(runs):
+        ax.legend(fontsize=8)
     return _save(fig, path)
 
 
@@ -58,18 +84,68 @@ def plot_scale_over_time(
     scales: Sequence[float], sequences: Sequence[str], frames: Sequence[int], path: str | Path, count: int = 5
 ) -> Path:
     """Scale against frame number for the ``count`` sequences with the largest σ/μ."""
-    scales = np.asarray(scales, dtype=np.float64)
+    return plot_scales_over_time({"": scales}, sequences, frames, path, count)
+
+
+def plot_scales_over_time(
+    runs: dict[str, Sequence[float]],
+    sequences: Sequence[str],
+    frames: Sequence[int],
+    path: str | Path,
+    count: int = 5,
+    normalise: bool = False,
+) -> Path:
+    """Scale against frame number for the ``count`` sequences with the largest σ/μ in the first run,
+    one colour per sequence and one line style per run (label → (N,) scales of the same N frames)."""
+    arrays = _runs(runs, normalise)
     frames = np.asarray(frames)
-    groups = _by_sequence(scales, sequences)
-    cv = {name: scales[idx].std() / scales[idx].mean() for name, idx in groups.items()}
+    first = next(iter(arrays.values()))
+    groups = _by_sequence(first, sequences)
+    cv = {name: first[idx].std() / first[idx].mean() for name, idx in groups.items()}
     fig, ax = plt.subplots(figsize=(7, 4))
-    for name in sorted(cv, key=cv.get, reverse=True)[:count]:
+    for c, name in enumerate(sorted(cv, key=cv.get, reverse=True)[:count]):
         idx = groups[name][np.argsort(frames[groups[name]], kind="stable")]
-        ax.plot(frames[idx], scales[idx], marker=".", label=f"{_short(name)}  σ/μ={cv[name]:.3f}")
+        for k, (label, scales) in enumerate(arrays.items()):
+            own = scales[idx].std() / scales[idx].mean()
+            ax.plot(
+                frames[idx],
+                scales[idx],
+                marker=".",
+                color=f"C{c}",
+                linestyle=("-", "--", ":", "-.")[k % 4],
+                label=f"{label + '  ' if label else ''}{short_name(name)}  σ/μ={own:.3f}",
+            )
     ax.set_xlabel("frame")
-    ax.set_ylabel("median scale")
-    ax.set_title(f"Scale over time, the {min(count, len(cv))} least consistent sequences")
+    ax.set_ylabel("scale / median scale of the run" if normalise else "median scale")
+    order = "" if len(arrays) == 1 else f" (of {next(iter(runs))})"
+    ax.set_title(f"Scale over time, the {min(count, len(cv))} least consistent sequences{order}")
     ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_paired_differences(rows: Sequence[dict], path: str | Path) -> Path:
+    """One panel per metric: each variant's mean paired difference from the reference with its interval.
+    ``rows``: dicts with ``metric``, ``variant``, ``mean``, ``low``, ``high`` (metrics in first-seen order)."""
+    metrics = list(dict.fromkeys(r["metric"] for r in rows))
+    cols = min(3, len(metrics))
+    grid = (-(-len(metrics) // cols), cols)
+    height = 0.35 * len(rows) / len(metrics) + 1.6
+    fig, axes = plt.subplots(*grid, figsize=(3.6 * cols, height * grid[0]), squeeze=False)
+    for ax in axes.flat[len(metrics) :]:
+        ax.set_visible(False)
+    for ax, metric in zip(axes.flat, metrics):
+        mine = [r for r in rows if r["metric"] == metric]
+        y = np.arange(len(mine))
+        mean = np.array([r["mean"] for r in mine])
+        err = np.abs(np.array([[r["low"] for r in mine], [r["high"] for r in mine]]) - mean)
+        ax.errorbar(mean, y, xerr=err, fmt="o", capsize=3)
+        ax.axvline(0, color="k", linewidth=0.8)
+        ax.set_yticks(y, [r["variant"] for r in mine])
+        ax.invert_yaxis()
+        ax.set_title(metric, fontsize=9)
+        ax.tick_params(axis="x", labelsize=7)
+        ax.locator_params(axis="x", nbins=4)
+    fig.suptitle("difference from the reference, mean over seeds with its bootstrap interval", fontsize=9)
     return _save(fig, path)
 
 

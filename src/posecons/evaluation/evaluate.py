@@ -10,14 +10,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.gt import load_gt
+from ..data.kitti_odometry import list_sequence_frames
 from ..data.kitti_raw import split_image_paths
 from ..data.splits import SplitLine, SplitSource
-from ..data.trajectory_io import write_kitti_poses, write_tum
+from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
-from ..inference.backend import Predictor, StepChain, predict_batches
+from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
 from ..inference.io import frames_from_paths
 from ..metrics.depth import CROP_FOR_GT_KIND, evaluate_depth
-from ..metrics.pose import align_trajectory, evaluate_pose
+from ..metrics.pose import align_trajectory, evaluate_pose, global_from_relative
 from ..plots import plot_error_histogram, plot_scale_boxplot, plot_scale_over_time, plot_trajectory_topview
 
 
@@ -86,6 +88,29 @@ def pose_result(
     result = evaluate_pose(estimate, gt, const_velocity)
     result.update(predictions=pred_name, ground_truth=gt_name)
     return result
+
+
+def checkpoint_depth(
+    checkpoint: Path, data_path: Path, split: Sequence[SplitLine], gt_path: Path, scalings: Sequence[str] = ("frame",)
+) -> dict[str, dict]:
+    """{scaling: :func:`depth_result`} of a checkpoint's disparities (predicted once) on the ``split``
+    lines against the LiDAR ground truth exported to ``gt_path``."""
+    gts, _ = load_gt(gt_path)
+    disps = model_disparities(load_predictor(checkpoint, "auto"), data_path, split)
+    return {s: depth_result(disps, gts, split, s, pred_name=str(checkpoint), gt_name=str(gt_path)) for s in scalings}
+
+
+def checkpoint_pose(checkpoint: Path, odometry: Path, sequence: str, out_dir: Path | None = None) -> dict:
+    """:func:`pose_result` (snippet ATE, full ATE / RPE, constant-velocity baseline) of a checkpoint's
+    chained steps on odometry ``sequence`` (ground truth ``odometry/poses/<NN>.txt``); with ``out_dir``
+    also its trajectory files and top view (:func:`write_trajectories`)."""
+    gt_file = Path(odometry) / "poses" / f"{int(sequence):02d}.txt"
+    gt = read_kitti_poses(gt_file)
+    steps = model_steps(load_predictor(checkpoint, "auto"), list_sequence_frames(odometry, sequence))
+    estimate = global_from_relative(steps)
+    if out_dir is not None:
+        write_trajectories(out_dir, estimate, gt)
+    return pose_result(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
 
 
 def write_depth_plots(result: dict, lines: Sequence[SplitLine], out_dir: Path) -> None:

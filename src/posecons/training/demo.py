@@ -12,46 +12,19 @@ import shutil
 import time
 from pathlib import Path
 
-import torch
-
-from ..checkpoint import describe_checkpoint, save_checkpoint
+from ..checkpoint import describe_checkpoint
 from ..config import load_config, resolve_preset
-from ..data.gt import export_gt, load_gt
-from ..data.kitti_odometry import list_sequence_frames
-from ..data.splits import SplitLine, read_split
+from ..data.gt import export_gt
+from ..data.splits import read_split
 from ..data.synth import generate_synth
-from ..data.trajectory_io import read_kitti_poses
 from ..evaluation import evaluate
 from ..evaluation.compare import checkpoint_note
 from ..fileio import write_json, write_text
-from ..inference.backend import load_predictor
-from ..metrics.pose import global_from_relative
-from ..model import PoseConsModel
 from ..plots import plot_validation
-from .trainer import train
+from .trainer import save_initial_weights, train
 
 # The demo's synthetic data set: small frames keep decoding cheap on a 2-core CPU.
 SYNTH = {"drives": 6, "frames": 120, "width": 384, "height": 128, "neighbours": 3}
-
-
-def _evaluate_depth(checkpoint: Path, data: Path, split: list[SplitLine], gt: Path, plots: Path | None = None) -> dict:
-    """Depth metrics and σ/μ of a checkpoint on the test split."""
-    gts, _ = load_gt(gt)
-    disps = evaluate.model_disparities(load_predictor(checkpoint, "auto"), data, split)
-    result = evaluate.depth_result(disps, gts, split, pred_name=str(checkpoint), gt_name=str(gt))
-    if plots is not None:
-        evaluate.write_depth_plots(result, split, plots)
-    return result
-
-
-def _evaluate_pose(checkpoint: Path, odometry: Path, sequence: str, plots: Path) -> dict:
-    """Snippet ATE, full ATE / RPE and the constant-velocity baseline of a checkpoint on one sequence."""
-    gt_file = odometry / "poses" / f"{sequence}.txt"
-    gt = read_kitti_poses(gt_file)
-    steps = evaluate.model_steps(load_predictor(checkpoint, "auto"), list_sequence_frames(odometry, sequence))
-    estimate = global_from_relative(steps)
-    evaluate.write_trajectories(plots, estimate, gt)
-    return evaluate.pose_result(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
 
 
 def _read_jsonl(path: Path) -> list[dict]:
@@ -75,14 +48,13 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     odom_seq = f"{int(meta['test_sequences'][0]):02d}"
 
     config = load_config(resolve_preset("synth/demo"), [f"train.seed={seed}", *overrides])
-    torch.manual_seed(seed)
     untrained = out / "untrained.pt"
-    save_checkpoint(untrained, {"config": config.to_dict(), "model": PoseConsModel(config).state_dict()})
+    save_initial_weights(untrained, config)
 
     print("[2/5] exporting test ground truth and evaluating the untrained network", flush=True)
     gt = ev / "gt_test.npz"
     export_gt(data, test_split, gt)
-    before = _evaluate_depth(untrained, data, test_split, gt)
+    before = evaluate.checkpoint_depth(untrained, data, test_split, gt)["frame"]
     write_json(ev / "depth_untrained.json", before)
 
     print("[3/5] training (synth/demo preset, cycle constraint) on the CPU", flush=True)
@@ -95,9 +67,10 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     weights = describe_checkpoint(ckpt)
 
     print("[4/5] evaluating depth (Eigen metrics, σ/μ) and pose (ATE) on the held-out drives", flush=True)
-    depth = {**_evaluate_depth(ckpt, data, test_split, gt, plots), "checkpoint": weights}
+    depth = {**evaluate.checkpoint_depth(ckpt, data, test_split, gt)["frame"], "checkpoint": weights}
+    evaluate.write_depth_plots(depth, test_split, plots)
     write_json(ev / "depth.json", depth)
-    pose = {**_evaluate_pose(ckpt, data / "odometry", odom_seq, plots), "checkpoint": weights}
+    pose = {**evaluate.checkpoint_pose(ckpt, data / "odometry", odom_seq, plots), "checkpoint": weights}
     write_json(ev / "pose.json", pose)
     validations = _read_jsonl(run / "metrics.jsonl")
     if validations:

@@ -155,7 +155,6 @@ class Trainer:
             )
         if t.deterministic:
             use_deterministic_algorithms(self.device)
-        self._seed_everything(t.seed + self.env.rank)
 
         train_file, val_file = split_files(config, data_path, split_dir)
         self.train_set = build_dataset(config, data_path, train_file, train=True)
@@ -178,7 +177,7 @@ class Trainer:
             )
 
         # A resumed run takes its weights from last.pt: nothing is downloaded, so it also resumes offline.
-        model = PoseConsModel(_without_imagenet(config) if resume else config).to(self.device)
+        model = initial_model(_without_imagenet(config) if resume else config, t.seed + self.env.rank).to(self.device)
         if not resume:  # the run's config says what "auto" resolved to
             config.model.pretrained = model.initialisation.startswith("ImageNet")
         self.initialisation = model.initialisation
@@ -224,10 +223,6 @@ class Trainer:
             self.writer = SummaryWriter(self.out / "tb")
 
     # ------------------------------------------------------------------ state
-    def _seed_everything(self, seed: int) -> None:
-        random.seed(seed)
-        torch.manual_seed(seed)
-
     @property
     def eval_model(self) -> PoseConsModel:
         """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
@@ -530,6 +525,29 @@ class Trainer:
             self.best = score
             self.save_weights("best.pt", selected_by=self.config.train.best_metric)
         return metrics
+
+
+def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
+    """The network a run of ``config`` starts from. The RNGs are seeded with ``seed`` (default
+    ``train.seed``) right before it is built, so nothing set up earlier (data, validation, a
+    variant's options) can shift the initial weights: every variant of a study with the same seed
+    starts from the same weights, and training continues the RNG streams from here."""
+    seed = config.train.seed if seed is None else seed
+    random.seed(seed)
+    torch.manual_seed(seed)
+    return PoseConsModel(config)
+
+
+def save_initial_weights(path: str | Path, config: Config) -> None:
+    """The untrained network of ``config`` (:func:`initial_model`) as a weights checkpoint at step 0,
+    the reference row of an evaluation."""
+    config = copy.deepcopy(config)
+    model = initial_model(config)
+    config.model.pretrained = model.initialisation.startswith("ImageNet")  # what "auto" resolved to
+    save_checkpoint(
+        path,
+        {"config": config.to_dict(), "model": model.state_dict(), "step": 0, "initialisation": model.initialisation},
+    )
 
 
 def describe_selection(best_metric: str) -> str:

@@ -1,5 +1,5 @@
 """Synthetic KITTI-like driving data: a numpy ray caster over analytic primitives."""
 
-from .generate import Drive, drive_folder, generate_synth, make_drive
+from .generate import Drive, check_synth_args, drive_folder, generate_synth, make_drive
 
-__all__ = ["Drive", "drive_folder", "generate_synth", "make_drive"]
+__all__ = ["Drive", "check_synth_args", "drive_folder", "generate_synth", "make_drive"]

@@ -162,6 +162,17 @@ def moving_frames(drive: Drive, rig: Rig, neighbours: int = 1) -> list[int]:
     return [i + neighbours for i in np.nonzero(span >= STATIC_SPAN)[0]]
 
 
+def check_synth_args(drives: int, frames: int, ext: str, width: int, height: int, neighbours: int) -> None:
+    """Refuse a data set :func:`generate_synth` cannot make, before any work."""
+    if drives < 2 or frames < 2 * neighbours + 1 or neighbours < 1:
+        raise PoseconsError(
+            f"synth needs at least 2 drives (one held out for testing) and {2 * neighbours + 1} "
+            f"frames for ±{neighbours} neighbours, got {drives} × {frames}"
+        )
+    if ext not in ("png", "jpg") or width < 16 or height < 16:
+        raise PoseconsError(f"synth: unsupported --ext {ext!r} or size {width}x{height}")
+
+
 def generate_synth(
     out: Path,
     drives: int = 4,
@@ -178,13 +189,7 @@ def generate_synth(
     Training lines are the moving frames whose neighbours ±``neighbours`` exist, for training
     with ``model.frame_ids: [0, -n, n]``.
     """
-    if drives < 2 or frames < 2 * neighbours + 1 or neighbours < 1:
-        raise PoseconsError(
-            f"synth needs at least 2 drives (one held out for testing) and {2 * neighbours + 1} "
-            f"frames for ±{neighbours} neighbours, got {drives} × {frames}"
-        )
-    if ext not in ("png", "jpg") or width < 16 or height < 16:
-        raise PoseconsError(f"synth: unsupported --ext {ext!r} or size {width}x{height}")
+    check_synth_args(drives, frames, ext, width, height, neighbours)
     workers = workers or min(2, os.cpu_count() or 1)
     rig, lidar = Rig(width, height), lidar_for_width(width)
     textures = make_textures(np.random.default_rng([seed, 1_000_003]))

@@ -1,0 +1,357 @@
+"""The study report, from the result JSONs alone: depth in the paper's Table 1 layout (frame and
+per-sequence median scaling), pose in its Table 3 layout, paired differences from the reference
+variant with bootstrap intervals, and Figure 1 (per-frame scales) for the reference and the most
+scale-consistent variant. ``--report-only`` rebuilds it from a folder of JSONs (e.g. committed ones).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Callable, Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from ..errors import PoseconsError
+from ..fileio import output_dir, write_text
+from ..metrics.stats import MIN_SEEDS, mean_std, paired_differences, summarise_differences
+from .spec import UNTRAINED
+
+STUDY_FILE = "study.json"
+Getter = Callable[[dict], Any]
+# (JSON key, header, format) of the Eigen metrics; a_k is δ < 1.25^k.
+DEPTH_COLUMNS = (
+    ("abs_rel", "abs rel", ".3f"),
+    ("sq_rel", "sq rel", ".3f"),
+    ("rmse", "rmse", ".3f"),
+    ("rmse_log", "rmse log", ".3f"),
+    ("a1", "δ<1.25", ".3f"),
+    ("a2", "δ<1.25²", ".3f"),
+    ("a3", "δ<1.25³", ".3f"),
+)
+POSE_COLUMNS = (
+    ("ate_mean", "snippet ATE mean", ".4f"),
+    ("ate_std", "snippet ATE std", ".4f"),
+    ("ate_full_rmse", "full ATE (m)", ".3f"),
+    ("rpe_trans", "RPE trans (%)", ".2f"),
+    ("rpe_rot", "RPE rot (°/m)", ".4f"),
+)
+
+
+def load_study(folder: Path) -> dict:
+    """The ``study.json`` a study wrote into its results folder."""
+    path = Path(folder) / STUDY_FILE
+    if not path.is_file():
+        raise PoseconsError(f"{folder}: no {STUDY_FILE}, so not the results folder of a posecons study")
+    return read_json(path)
+
+
+def load_results(folder: Path) -> list[dict]:
+    """Every run's result JSON in ``folder`` (all ``*.json`` but study.json)."""
+    results = []
+    for path in sorted(Path(folder).glob("*.json")):
+        if path.name == STUDY_FILE or path.name.startswith("."):
+            continue
+        result = read_json(path)
+        if not {"variant", "seed", "depth"} <= set(result):
+            raise PoseconsError(f"{path}: not a study result (no variant, seed and depth)")
+        results.append(result)
+    return results
+
+
+def read_json(path: Path) -> dict:
+    """A JSON file of the study; a damaged one is an error naming it."""
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise PoseconsError(f"{path}: not valid JSON ({exc})") from None
+
+
+def _number(value: Any) -> float:
+    return float(value) if isinstance(value, (int, float)) else math.nan
+
+
+def _values(results: Sequence[dict], get: Getter) -> dict[str, dict[int, float]]:
+    """variant → {seed: value} (NaN where the value is missing)."""
+    out: dict[str, dict[int, float]] = {}
+    for r in results:
+        out.setdefault(r["variant"], {})[int(r["seed"])] = _number(get(r))
+    return out
+
+
+def _cell(values: Sequence[float], fmt: str) -> str:
+    """'mean ± std' over seeds; the mean alone for one seed; '–' for none."""
+    mean, std = mean_std(values)
+    if math.isnan(mean):
+        return "–"
+    return f"{mean:{fmt}}" if math.isnan(std) else f"{mean:{fmt}} ± {std:{fmt}}"
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join([" --- "] + [" ---: "] * (len(header) - 1)) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows]) + "\n"
+
+
+def _rows(names: Sequence[str], columns: Sequence[tuple[Getter, str]], results: Sequence[dict]) -> list[list[str]]:
+    """One row per variant name: its number of seeds, then each column's cell over them."""
+    rows = []
+    for name in names:
+        mine = [r for r in results if r["variant"] == name]
+        rows.append([name, str(len(mine))] + [_cell([_number(get(r)) for r in mine], fmt) for get, fmt in columns])
+    return rows
+
+
+def _depth(scaling: str, key: str) -> Getter:
+    return lambda r: r["depth"].get(scaling, {}).get(key)
+
+
+def _sequence_cv(name: str) -> Getter:
+    return lambda r: r["depth"]["frame"].get("per_sequence", {}).get(name, {}).get("scale_cv")
+
+
+def _pose(seq: str, key: str, baseline: bool = False) -> Getter:
+    def get(r: dict) -> Any:
+        result = r.get("pose", {}).get(seq, {})
+        return (result.get("const_velocity", {}) if baseline else result).get(key)
+
+    return get
+
+
+def depth_tables(names: Sequence[str], results: Sequence[dict]) -> str:
+    """Table 1 with frame-median scaling (σ/μ per test sequence, their mean, pooled σ/median, Eigen
+    metrics) and the Eigen metrics again with per-sequence scaling."""
+    from ..plots import short_name
+
+    sequences = list(results[0]["depth"]["frame"].get("per_sequence", {}))
+    frame_cols = [(_sequence_cv(s), ".4f") for s in sequences] + [
+        (_depth("frame", "scale_cv"), ".4f"),
+        (_depth("frame", "scale_std_over_median"), ".4f"),
+    ]
+    frame_cols += [(_depth("frame", key), fmt) for key, _, fmt in DEPTH_COLUMNS]
+    header = ["variant", "n"] + [f"σ/μ {short_name(s)}" for s in sequences] + ["σ/μ mean", "σ/median pooled"]
+    header += [h for _, h, _ in DEPTH_COLUMNS]
+    seq_cols = [(_depth("sequence", key), fmt) for key, _, fmt in DEPTH_COLUMNS]
+    return (
+        "### Frame-median scaling (each frame scaled by median(gt)/median(pred))\n\n"
+        + _table(header, _rows(names, frame_cols, results))
+        + "\n### Per-sequence scaling (one factor per sequence: the median of its frame scales)\n\n"
+        "σ/μ does not depend on the scaling (it is computed from the same per-frame scales), so only the "
+        "error metrics are repeated; with one factor per sequence, a scale that drifts within a sequence "
+        "shows up as error.\n\n"
+        + _table(["variant", "n"] + [h for _, h, _ in DEPTH_COLUMNS], _rows(names, seq_cols, results))
+    )
+
+
+def pose_tables(names: Sequence[str], results: Sequence[dict]) -> str:
+    """Table 3 per test sequence: snippet ATE beside full ATE and RPE, and the constant-velocity row."""
+    sequences = list(dict.fromkeys(seq for r in results for seq in r.get("pose", {})))
+    if not sequences:
+        return "No pose evaluation (the spec names no odometry sequences).\n"
+    text = []
+    for seq in sequences:
+        columns = [(_pose(seq, key), fmt) for key, _, fmt in POSE_COLUMNS]
+        rows = _rows(names, columns, results)
+        baseline = next(r for r in results if seq in r.get("pose", {}))  # the same for every run: GT only
+        rows.append(
+            ["constant velocity (no images)", "–"]
+            + [_cell([_number(_pose(seq, key, True)(baseline))], fmt) for key, _, fmt in POSE_COLUMNS]
+        )
+        text.append(
+            f"### Odometry sequence {seq}\n\n" + _table(["variant", "n"] + [h for _, h, _ in POSE_COLUMNS], rows)
+        )
+    return "\n".join(text)
+
+
+def paired_metrics(results: Sequence[dict]) -> list[tuple[str, Getter, str]]:
+    """(label, getter, format) of the metrics compared seed by seed."""
+    metrics = [
+        ("mean σ/μ", _depth("frame", "scale_cv"), ".4f"),
+        ("abs rel", _depth("frame", "abs_rel"), ".4f"),
+        ("abs rel, per-seq. scaling", _depth("sequence", "abs_rel"), ".4f"),
+        ("δ<1.25", _depth("frame", "a1"), ".4f"),
+    ]
+    for seq in dict.fromkeys(seq for r in results for seq in r.get("pose", {})):
+        metrics += [(f"snippet ATE {seq}", _pose(seq, "ate_mean"), ".4f")]
+        metrics += [(f"full ATE {seq}", _pose(seq, "ate_full_rmse"), ".3f")]
+    return metrics
+
+
+def paired_rows(variants: Sequence[str], results: Sequence[dict]) -> list[dict]:
+    """For each metric and each variant but the reference (the first): the summary of its per-seed
+    differences from the reference (:func:`~posecons.metrics.stats.summarise_differences`)."""
+    rows = []
+    for label, get, fmt in paired_metrics(results):
+        values = _values([r for r in results if r["variant"] in variants], get)
+        diffs = paired_differences({v: values.get(v, {}) for v in variants}, variants[0])
+        for variant in variants[1:]:
+            rows.append({"metric": label, "variant": variant, "format": fmt, **summarise_differences(diffs[variant])})
+    return rows
+
+
+def paired_table(rows: Sequence[dict], reference: str) -> str:
+    cells = []
+    for r in rows:
+        fmt = r["format"]
+        if r["n"] == 0:
+            cells.append([r["metric"], r["variant"], "0", "–", "–", "–", "no paired seeds"])
+            continue
+        word = r["verdict"] if r["meaningful"] else f"{r['verdict']} (n < {MIN_SEEDS}: interval not meaningful)"
+        cells.append(
+            [
+                r["metric"],
+                r["variant"],
+                str(r["n"]),
+                f"{r['mean']:+{fmt}}",
+                f"[{r['low']:+{fmt}}, {r['high']:+{fmt}}]",
+                r["signs"],
+                word,
+            ]
+        )
+    header = ["metric", f"variant − {reference}", "n seeds", "mean difference", "95 % interval", "signs", "verdict"]
+    return _table(header, cells)
+
+
+def _figure1(variants: Sequence[str], results: Sequence[dict], figures: Path) -> str:
+    """Figure 1 (box plot per sequence, scale over time) for the reference and the variant with the
+    lowest mean σ/μ, from one seed both have."""
+    from ..plots import plot_scale_boxplots, plot_scales_over_time
+
+    cv = {v: mean_std(list(_values(results, _depth("frame", "scale_cv")).get(v, {}).values()))[0] for v in variants}
+    others = [v for v in variants[1:] if not math.isnan(cv[v])]
+    chosen = [variants[0]] + ([min(others, key=cv.get)] if others else [])
+    seeds = sorted(set.intersection(*({int(r["seed"]) for r in results if r["variant"] == v} for v in chosen)))
+    if math.isnan(cv[variants[0]]) or not seeds:
+        return "No figure yet: the reference variant has no finished run.\n"
+    seed = seeds[0]
+    runs = {v: next(r for r in results if r["variant"] == v and int(r["seed"]) == seed) for v in chosen}
+    lines = [line.split() for line in runs[variants[0]]["test_lines"]]
+    sequences, frames = [line[0] for line in lines], [int(line[1]) for line in lines]
+    scales = {v: [math.nan if s is None else s for s in runs[v]["depth"]["frame"]["scales"]] for v in chosen}
+    plot_scale_boxplots(scales, sequences, figures / "scale_boxplot.png", normalise=True)
+    plot_scales_over_time(scales, sequences, frames, figures / "scale_over_time.png", count=3, normalise=True)
+    which = f"**{chosen[0]}** (reference)" + (f" and **{chosen[1]}** (lowest mean σ/μ)" if len(chosen) > 1 else "")
+    return (
+        f"{which}, seed {seed}. Each run's per-frame scales median(gt)/median(pred), divided by their "
+        "median over the test set (a monocular network's overall scale is arbitrary; the spread is what "
+        f"σ/μ measures).\n\n![scale box plot]({figures.name}/scale_boxplot.png)\n\n"
+        f"![scale over time]({figures.name}/scale_over_time.png)\n"
+    )
+
+
+def _missing(study: dict, results: Sequence[dict]) -> tuple[list[str], list[str], int]:
+    """(missing runs, missing untrained seeds, runs done) against the spec's variants × seeds."""
+    have = {(r["variant"], int(r["seed"])) for r in results}
+    runs = [(v, s) for s in study["seeds"] for v in study["variants"]]
+    missing = [f"{v} seed {s}" for v, s in runs if (v, s) not in have]
+    untrained = [str(s) for s in study["seeds"] if (UNTRAINED, s) not in have]
+    return missing, untrained, len(runs) - len(missing)
+
+
+def _data_line(data: dict) -> str:
+    if "synth" in data:
+        s = data["synth"]
+        return (
+            f"synthetic KITTI-format data (`posecons synth`: {s['drives']} drives × {s['frames']} frames, "
+            f"{s['width']}×{s['height']}, ±{s['neighbours']} neighbours, seed {s['seed']}), its held-out drives"
+        )
+    pose = (
+        f"; odometry `{data['odometry']}` sequences {', '.join(data['odometry_sequences'])}"
+        if "odometry" in data
+        else ""
+    )
+    return f"KITTI raw `{data['path']}`, test split `{data['test_split']}` (LiDAR ground truth){pose}"
+
+
+def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
+    """The whole report (Markdown); writes its figures into ``figures``."""
+    from ..plots import plot_paired_differences
+
+    variants = list(study["variants"])
+    names = [UNTRAINED] + variants
+    missing, untrained_missing, done = _missing(study, results)
+    runs = len(study["seeds"]) * len(variants)
+    envs = [r["environment"] for r in results if "environment" in r]
+    code = "; ".join(dict.fromkeys(f"commit `{e['commit']}` on {e['machine']} (torch {e['torch']})" for e in envs))
+    trained = [r for r in results if r["variant"] != UNTRAINED]
+    overview = _table(
+        ["variant", "overrides (after the spec's)", "runs done", "steps", "train minutes"],
+        [
+            [
+                v + (" (reference)" if v == variants[0] else ""),
+                ", ".join(f"`{o}`" for o in study["variants"][v]) or "–",
+                str(sum(r["variant"] == v for r in trained)),
+                _cell([r["steps"] for r in trained if r["variant"] == v], ".0f"),
+                _cell([r["train_minutes"] for r in trained if r["variant"] == v], ".1f"),
+            ]
+            for v in variants
+        ],
+    )
+    header = f"""# Study: {Path(study["spec"]).name}
+
+- spec: `{study["spec"]}`; preset `{study["preset"]}`; overrides for every run: {", ".join(f"`{o}`" for o in study["overrides"]) or "none"}
+- data: {_data_line(study["data"])}
+- seeds: {", ".join(map(str, study["seeds"]))} (`train.seed`: the same initial weights and data order for every variant of a seed)
+- code and machine: {code or "–"}
+- generated: {datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")}
+- runs done: {done} of {runs}{"; missing: " + ", ".join(missing) if missing else ""}{"; untrained missing for seeds " + ", ".join(untrained_missing) if untrained_missing else ""}
+- weights evaluated: each run's `checkpoints/last.pt`, the last step (no model selection, no ground truth);
+  `untrained` is the initial network of each seed
+- cells: mean ± sample std over the seeds done (n); one value when n = 1
+
+{overview}"""
+    if not results:
+        return header + "\nNo results yet.\n"
+    paired = paired_rows(variants, results)
+    figure = ""
+    if len(variants) > 1 and any(r["n"] for r in paired):
+        plot_paired_differences([r for r in paired if r["n"]], figures / "paired_differences.png")
+        figure = f"\n![paired differences]({figures.name}/paired_differences.png)\n"
+    n = sorted({r["n"] for r in paired}) or [0]
+    comparison = paired_table(paired, variants[0]) if paired else "Only one variant: nothing to compare.\n"
+    return f"""{header}
+## Depth (paper Table 1 layout)
+
+Test: {_data_line(study["data"])}; Garg crop; σ/μ per sequence of the per-frame scales, their mean
+(the paper's σ/μ) and the pooled std(s / median(s)) over all frames (as Monodepth2 prints it).
+
+{depth_tables(names, results)}
+## Ego-motion (paper Table 3 layout)
+
+Snippet ATE: 5-frame snippets, each scaled to the ground truth by least squares (mean and std over
+snippets); full ATE: the chained trajectory after Sim(3) alignment; RPE over KITTI's 100–800 m
+segments (10–80 % of the path on shorter sequences). The constant-velocity row repeats the first
+ground-truth step and needs no images.
+
+{pose_tables(names, results)}
+## Paired differences from {variants[0]}
+
+Per seed, variant − {variants[0]} (the same seed: the same initial weights and data order), then the
+mean over seeds and a 95 % percentile-bootstrap interval of that mean (10 000 resamples of the seeds
+with replacement, RNG seed 0). "lower"/"higher": the interval excludes 0; "within noise": it does
+not. n = {", ".join(map(str, n))} seeds{"; below " + str(MIN_SEEDS) + " seeds the interval is not meaningful" if n[0] < MIN_SEEDS else ""}.
+Lower is better for σ/μ, abs rel and ATE; higher for δ<1.25.
+
+{comparison}{figure}
+## Figure 1: per-frame scale
+
+{_figure1(variants, results, figures)}"""
+
+
+def write_report(results_dir: Path, report: Path, study: dict | None = None, publish: bool = False) -> Path:
+    """Write ``report`` (Markdown) and its figures into the folder beside it named after it
+    (docs/results.md → docs/results/); with ``publish`` also copy the JSONs (and study.json) into that
+    folder's ``json/``, so the report can be rebuilt from committed files alone."""
+    results_dir, report = Path(results_dir), Path(report)
+    study = study or load_study(results_dir)
+    figures = report.with_suffix("")
+    text = report_text(study, load_results(results_dir), figures)
+    copies = figures / "json"
+    if publish and copies.resolve() != results_dir.resolve():
+        with output_dir(copies) as tmp:
+            for path in sorted(results_dir.glob("*.json")):
+                if not path.name.startswith("."):
+                    shutil.copyfile(path, tmp / path.name)
+    write_text(report, text)
+    return report

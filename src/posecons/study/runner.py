@@ -1,0 +1,254 @@
+"""``posecons study``: every (variant, seed) run of a spec → train → evaluate its last weights → one
+JSON each → the report. Rerunning it skips what is done and resumes what was interrupted.
+
+The study folder::
+
+    OUT/data/                          the synthetic data set (specs with data.synth), made once
+    OUT/gt/test_depth.npz              ground truth of the test split, exported once
+    OUT/untrained/seed<k>.pt           the initial weights of every run with seed k
+    OUT/runs/<variant>/seed<k>/        a `posecons train` run directory
+    OUT/results/study.json             the spec as last run (variant order, seeds, data)
+    OUT/results/<variant>_seed<k>.json one evaluation each, written when it is complete: present = done
+    OUT/results/untrained_seed<k>.json the untrained network of seed k, the reference row
+    OUT/results.md, OUT/results/*.png  the report (or --report PATH)
+
+Each run evaluates ``checkpoints/last.pt`` — the weights at the last step, chosen without ground
+truth — with frame and per-sequence median scaling, and its pose net on every test odometry sequence.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..checkpoint import describe_checkpoint
+from ..config import Config, config_from_dict
+from ..data.gt import export_gt
+from ..data.splits import SplitLine, read_split
+from ..data.synth import generate_synth
+from ..errors import Interrupted, PoseconsError
+from ..evaluation import evaluate
+from ..fileio import write_json
+from ..training.trainer import save_initial_weights, train
+from .report import STUDY_FILE, read_json, write_report
+from .spec import UNTRAINED, StudySpec
+
+SCALINGS = ("frame", "sequence")
+
+
+def result_name(variant: str, seed: int) -> str:
+    return f"{variant}_seed{seed}.json"
+
+
+@dataclass
+class StudyData:
+    """Where a study trains and what it is evaluated on."""
+
+    train_path: Path  # data root passed to train
+    split: list[SplitLine]  # depth test lines
+    gt: Path  # their exported ground truth
+    odometry: Path | None  # odometry root with sequences/ and poses/
+    sequences: list[str]  # test odometry sequences ("09")
+
+
+class Progress:
+    """One line per run start and finish, with the elapsed time and the runs left."""
+
+    def __init__(self, total: int):
+        self.start, self.left = time.monotonic(), total
+
+    def line(self, text: str) -> None:
+        print(f"[study {(time.monotonic() - self.start) / 60:6.1f} min] {text}", flush=True)
+
+
+def _flat(d: dict, prefix: str = "") -> dict[str, Any]:
+    out = {}
+    for key, value in d.items():
+        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {f"{prefix}{key}": value})
+    return out
+
+
+def config_changes(recorded: dict, wanted: Config) -> list[str]:
+    """'key: old → new' for each setting in which a run's recorded config differs from the spec's
+    (defaults added since the run count as unchanged; ``pretrained: auto`` matches what it resolved to)."""
+    try:
+        old = _flat(config_from_dict(recorded).to_dict())
+    except PoseconsError as exc:
+        return [f"its config is not readable here ({exc})"]
+    new = _flat(wanted.to_dict())
+    if wanted.model.pretrained == "auto":
+        del old["model.pretrained"], new["model.pretrained"]
+    return [f"{k}: {old.get(k)!r} → {new.get(k)!r}" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
+
+
+def check_existing(spec: StudySpec, out: Path) -> None:
+    """Refuse, before any work, to continue a study folder whose data or runs do not match the spec."""
+    study_file = out / "results" / STUDY_FILE
+    if study_file.is_file():
+        recorded = read_json(study_file).get("data")
+        if recorded != spec.data:
+            raise PoseconsError(
+                f"{out} holds a study of other data ({recorded}, spec: {spec.data}); choose a new --out"
+            )
+    runs = [(v, s, spec.config(v, s)) for v, s in spec.runs()]
+    runs += [(UNTRAINED, s, spec.config(spec.reference, s)) for s in spec.seeds]
+    for variant, seed, config in runs:
+        result = out / "results" / result_name(variant, seed)
+        run_config = out / "runs" / variant / f"seed{seed}" / "config.yaml"
+        if result.is_file():
+            recorded, where = read_json(result).get("config", {}), result
+        elif run_config.is_file():
+            recorded, where = yaml.safe_load(run_config.read_text()), run_config
+        else:
+            continue
+        changes = config_changes(recorded, config)
+        if changes:
+            raise PoseconsError(
+                f"{where}: this run has another config than the spec gives it ({'; '.join(changes[:3])}); "
+                "choose a new --out, or delete the run and its result to redo it"
+            )
+
+
+def prepare_data(spec: StudySpec, out: Path) -> StudyData:
+    """Generate the synthetic data (once) or take the KITTI roots; export the test ground truth once."""
+    if "synth" in spec.data:
+        root = out / "data"
+        if not (root / "synth.json").is_file():
+            print("[study] generating the synthetic KITTI-format data set", flush=True)
+            generate_synth(root, **spec.data["synth"])
+        meta = json.loads((root / "synth.json").read_text())
+        split = read_split(root / "splits" / "synth" / "test_files.txt")
+        odometry, sequences = root / "odometry", list(meta["test_sequences"])
+    else:
+        root = Path(spec.data["path"])
+        split = read_split(spec.data["test_split"])
+        odometry = Path(spec.data["odometry"]) if "odometry" in spec.data else None
+        sequences = spec.data.get("odometry_sequences", [])
+    gt = out / "gt" / "test_depth.npz"
+    if not gt.is_file():
+        print(f"[study] exporting the ground truth of {len(split)} test frames", flush=True)
+        export_gt(root, split, gt)
+    return StudyData(root, split, gt, odometry, sequences)
+
+
+def _commit() -> str:
+    """``git describe`` of the source tree this package runs from, where it is a git checkout."""
+    try:
+        done = subprocess.run(
+            ["git", "describe", "--always", "--dirty", "--tags"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else "unknown (not a git checkout)"
+
+
+def environment(accelerator: str) -> dict[str, str]:
+    """Code and machine of a run, for the report's header."""
+    import torch
+
+    machine = f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU threads"
+    if accelerator != "cpu" and torch.cuda.is_available():
+        machine += f", {torch.cuda.get_device_name()}"
+    return {"commit": _commit(), "machine": machine, "python": platform.python_version(), "torch": torch.__version__}
+
+
+def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
+    """Depth with both scalings and pose on each test sequence of one checkpoint."""
+    depth = evaluate.checkpoint_depth(checkpoint, data.train_path, data.split, data.gt, SCALINGS)
+    pose = {seq: evaluate.checkpoint_pose(checkpoint, data.odometry, seq) for seq in data.sequences}
+    return {"depth": depth, "pose": pose, "test_lines": [str(line) for line in data.split]}
+
+
+def _train(config: Config, data: StudyData, run_dir: Path, accelerator: str, quiet: bool) -> dict:
+    """Train a run, resume an interrupted one, or read the summary of a finished one."""
+    summary, last = run_dir / "train_summary.json", run_dir / "checkpoints" / "last.pt"
+    if summary.is_file() and last.is_file():
+        return json.loads(summary.read_text())
+    return train(config, data.train_path, run_dir, resume=last.is_file(), accelerator=accelerator, quiet=quiet)
+
+
+def run_study(
+    spec: StudySpec, out: Path, report: Path, publish: bool = False, accelerator: str = "auto", quiet: bool = False
+) -> int:
+    """Every missing run of ``spec`` into ``out``, rewriting ``report`` (:func:`.report.write_report`,
+    ``publish`` as there) after each one; returns the number of runs trained or resumed."""
+    check_existing(spec, out)
+    results = out / "results"
+
+    def refresh() -> None:
+        write_report(results, report, spec.describe(), publish)
+
+    write_json(results / STUDY_FILE, spec.describe())
+    data = prepare_data(spec, out)
+    env = environment(accelerator)
+    done = [r for r in spec.runs() if (results / result_name(*r)).is_file()]
+    todo = [r for r in spec.runs() if r not in done]
+    progress = Progress(len(todo))
+    progress.line(f"{len(done)} of {len(spec.runs())} runs done before, {len(todo)} to go")
+
+    for seed in spec.seeds:  # the reference row: the initial weights every run of the seed starts from
+        target = results / result_name(UNTRAINED, seed)
+        if not target.is_file():
+            weights = out / "untrained" / f"seed{seed}.pt"
+            config = spec.config(spec.reference, seed)
+            save_initial_weights(weights, config)
+            result = {"variant": UNTRAINED, "seed": seed, "overrides": spec.run_overrides(spec.reference, seed)}
+            result.update(config=config.to_dict(), checkpoint=describe_checkpoint(weights), train_minutes=0, steps=0)
+            write_json(target, {**result, **evaluate_weights(weights, data), "environment": env, "finished": _now()})
+            progress.line(f"evaluated the untrained network of seed {seed}")
+
+    for variant, seed in todo:
+        run_dir = out / "runs" / variant / f"seed{seed}"
+        progress.line(f"start {variant} seed {seed} → {run_dir} ({progress.left} runs left)")
+        started = time.monotonic()
+        try:
+            summary = _train(spec.config(variant, seed), data, run_dir, accelerator, quiet)
+        except Interrupted as exc:  # its state is in last.pt once the loop began; the study resumes it
+            signum = exc.exit_code - 128
+            raise Interrupted(
+                f"stopped by {signal.Signals(signum).name} during {variant} seed {seed}; run the same "
+                "`posecons study` command again to continue",
+                signum,
+            ) from None
+        last = run_dir / "checkpoints" / "last.pt"
+        result = {
+            "variant": variant,
+            "seed": seed,
+            "overrides": spec.run_overrides(variant, seed),
+            "config": yaml.safe_load((run_dir / "config.yaml").read_text()),
+            "checkpoint": describe_checkpoint(last),
+            "train_minutes": summary["minutes"],
+            "steps": summary["steps"],
+            **evaluate_weights(last, data),
+            "environment": env,
+            "finished": _now(),
+        }
+        write_json(results / result_name(variant, seed), result)
+        progress.left -= 1
+        depth = result["depth"]["frame"]
+        progress.line(
+            f"done {variant} seed {seed} in {(time.monotonic() - started) / 60:.1f} min: σ/μ {depth['scale_cv']:.4f}, "
+            f"abs rel {depth['abs_rel']:.3f} ({progress.left} runs left)"
+        )
+        refresh()
+    if not todo:  # else the last run's refresh wrote it
+        refresh()
+    return len(todo)
+
+
+def _now() -> str:
+    return datetime.now().astimezone().isoformat(timespec="seconds")

@@ -1,0 +1,156 @@
+"""`posecons study` at toy size: runs → result JSONs → report, skipping finished runs, resuming an
+interrupted one, rebuilding the report from copied JSONs; the pairing of variants by seed; specs."""
+
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from posecons.checkpoint import load_checkpoint
+from posecons.cli import main
+from posecons.config import load_config, preset_names, resolve_preset
+from posecons.errors import PoseconsError
+from posecons.study import runner
+from posecons.study.spec import load_spec
+from posecons.training.trainer import Trainer, save_initial_weights
+
+SYNTH = {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}
+TINY = ["model.width=128", "train.max_steps=3", "train.batch_size=2", "train.val_every=off"]
+
+
+def write_spec(path: Path, **changes) -> Path:
+    spec = {
+        "preset": "synth/demo",
+        "overrides": TINY,
+        "data": {"synth": SYNTH},
+        "seeds": [0],
+        "variants": {"baseline": ["loss.constraints=[]"], "cyc": ["loss.constraints=[cyc]"]},
+        **changes,
+    }
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def table_rows(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.startswith("|")]
+
+
+@pytest.mark.slow
+def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_json(tmp_path, monkeypatch, capsys):
+    spec, out = write_spec(tmp_path / "toy.yaml"), tmp_path / "study"
+    argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu"]
+    calls = []
+    real_train = runner.train
+
+    def spy(config, data, run_dir, **kwargs):
+        calls.append((Path(run_dir).parent.name, kwargs["resume"]))
+        return real_train(config, data, run_dir, **kwargs)
+
+    monkeypatch.setattr(runner, "train", spy)
+
+    def stop_cyc_after_one_step(self):  # as if Ctrl-C arrived during the cyc run's first step
+        if "cyc" in str(self.out) and self.step == 1:
+            self.stop.signum = signal.SIGINT
+        return bool(self.stop.signum)
+
+    with monkeypatch.context() as m:
+        m.setattr(Trainer, "_stop_requested", stop_cyc_after_one_step)
+        assert main(argv) == 130
+    assert "run the same `posecons study` command again" in capsys.readouterr().err
+    results = out / "results"
+    assert (results / "baseline_seed0.json").is_file() and not (results / "cyc_seed0.json").exists()
+    assert load_checkpoint(out / "runs/cyc/seed0/checkpoints/last.pt")["step"] == 1
+    assert "missing: cyc seed 0" in (out / "results.md").read_text()  # the partial report says so
+
+    assert main(argv) == 0  # resumes cyc from step 1, leaves baseline alone
+    assert calls == [("baseline", False), ("cyc", False), ("cyc", True)]
+    cyc = json.loads((results / "cyc_seed0.json").read_text())
+    assert cyc["steps"] == 3 and cyc["checkpoint"]["step"] == 3 and cyc["checkpoint"]["file"].endswith("last.pt")
+    assert cyc["overrides"][-2:] == ["loss.constraints=[cyc]", "train.seed=0"] and cyc["config"]["train"]["seed"] == 0
+    for scaling in ("frame", "sequence"):
+        depth = cyc["depth"][scaling]
+        assert depth["scaling"] == scaling and len(depth["scales"]) == len(cyc["test_lines"]) == SYNTH["frames"]
+    assert set(cyc["pose"]) == {"02"} and "const_velocity" in cyc["pose"]["02"]
+    untrained = json.loads((results / "untrained_seed0.json").read_text())
+    assert untrained["checkpoint"]["step"] == 0 and untrained["depth"]["frame"]["abs_rel"] > 0
+
+    report = (out / "results.md").read_text()
+    assert "runs done: 2 of 2" in report and "missing" not in report
+    for part in ("Frame-median scaling", "Per-sequence scaling", "Odometry sequence 02", "Paired differences"):
+        assert part in report
+    assert "| untrained | 1 |" in report and "| baseline | 1 |" in report and "| cyc | 1 |" in report
+    assert "| mean σ/μ | cyc | 1 |" in report and "interval not meaningful" in report
+    for plot in ("scale_boxplot.png", "scale_over_time.png", "paired_differences.png"):
+        assert (results / plot).stat().st_size > 1000 and f"results/{plot}" in report
+
+    docs = tmp_path / "docs" / "results.md"
+    assert main(argv + ["--report", str(docs)]) == 0  # everything done: trains nothing, writes the report
+    assert len(calls) == 3
+    copies = sorted(p.name for p in (tmp_path / "docs/results/json").glob("[!.]*.json"))
+    assert copies == ["baseline_seed0.json", "cyc_seed0.json", "study.json", "untrained_seed0.json"]
+    again = tmp_path / "elsewhere" / "r.md"
+    assert (
+        main(["study", "--report-only", "--results", str(tmp_path / "docs/results/json"), "--report", str(again)]) == 0
+    )
+    assert table_rows(again.read_text()) == table_rows(docs.read_text()) == table_rows(report)
+    assert (tmp_path / "elsewhere/r/scale_boxplot.png").is_file()
+
+    write_spec(spec, overrides=[*TINY[:-3], "train.max_steps=4", *TINY[-2:]])
+    assert main(argv) == 2  # a changed recipe does not mix with the runs already done
+    assert "train.max_steps: 3 → 4" in capsys.readouterr().err
+    assert len(calls) == 3
+
+
+def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp_path):
+    """Seed k gives every variant the same initial weights (= the study's untrained network) and the
+    same first batch; another seed changes both, so the comparison can fail."""
+    data = make_synth(SYNTH["drives"], SYNTH["frames"], SYNTH["width"], SYNTH["height"], 0, "--neighbours", "3")
+    preset = resolve_preset("synth/demo")
+    variants = {
+        "baseline": ["loss.constraints=[]", "train.seed=3"],
+        "all": ["loss.constraints=[fb,id,cyc]", "loss.identity_fraction=0.5", "loss.cyc_weight=0.3", "train.seed=3"],
+        "other_seed": ["loss.constraints=[]", "train.seed=4"],
+    }
+    firsts, weights = {}, {}
+    for name, overrides in variants.items():
+        trainer = Trainer(load_config(preset, TINY + overrides), data, tmp_path / name, accelerator="cpu", quiet=True)
+        weights[name] = trainer.model.state_dict()
+        loader = trainer._loader(0, 0)
+        firsts[name] = (list(loader.sampler)[:2], next(iter(loader)))
+        trainer.writer.close()
+    save_initial_weights(tmp_path / "untrained.pt", load_config(preset, TINY + variants["baseline"]))
+    untrained = load_checkpoint(tmp_path / "untrained.pt")["model"]
+    for key, value in weights["baseline"].items():
+        assert torch.equal(value, weights["all"][key]) and torch.equal(value, untrained[key]), key
+    assert any(not torch.equal(v, weights["other_seed"][k]) for k, v in weights["baseline"].items())
+    assert firsts["baseline"][0] == firsts["all"][0] != firsts["other_seed"][0]
+    batch, other = firsts["baseline"][1], firsts["all"][1]
+    assert all(torch.equal(v, other[k]) for k, v in batch.items() if torch.is_tensor(v))  # frames, augmentation
+
+
+def test_spec_checks_and_bundled_specs(tmp_path):
+    """Bundled specs are valid and are no training presets; a spec's problems name the spec file."""
+    for name in ("synth", "kitti_gpu"):
+        copy = resolve_preset("synth/demo").parents[1] / "study" / f"{name}.yaml"
+        spec = load_spec(copy, data_path=tmp_path if name == "kitti_gpu" else None)
+        assert spec.reference == "baseline" and spec.seeds == [0, 1, 2]
+        assert spec.config("baseline", 2).loss.constraints == [] and spec.config("cyc", 1).train.seed == 1
+    assert load_spec(copy, data_path=tmp_path).data["test_split"].endswith("eigen/test_files.txt")
+    assert not any(name.startswith("study/") for name in preset_names())
+    with pytest.raises(PoseconsError, match="neither a file nor a bundled preset"):
+        resolve_preset("study/synth")
+    with pytest.raises(PoseconsError, match="kitti_gpu.yaml: data.path is not set: pass .* --data-path"):
+        load_spec("study/kitti_gpu")
+    bad = write_spec(tmp_path / "seeded.yaml", variants={"a": ["train.seed=1"]})
+    with pytest.raises(PoseconsError, match="seeded.yaml: variant 'a': train.seed is set by seeds:"):
+        load_spec(bad)
+    bad = write_spec(tmp_path / "kitti.yaml", preset="kitti/baseline")
+    with pytest.raises(
+        PoseconsError, match="kitti.yaml: variant 'baseline': synthetic data trains on data.split=synth"
+    ):
+        load_spec(bad)
