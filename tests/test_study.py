@@ -78,12 +78,19 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert set(cyc["pose"]) == {"02"} and "const_velocity" in cyc["pose"]["02"]
     untrained = json.loads((results / "untrained_seed0.json").read_text())
     assert untrained["checkpoint"]["step"] == 0 and untrained["depth"]["frame"]["abs_rel"] > 0
+    floor = json.loads((results / "renderer_depth_seed0.json").read_text())["depth"]["frame"]
+    assert floor["abs_rel"] < untrained["depth"]["frame"]["abs_rel"] / 2  # the renderer's depth: near perfect
 
     report = (out / "results.md").read_text()
     assert "runs done: 2 of 2" in report and "missing" not in report
     for part in ("Frame-median scaling", "Per-sequence scaling", "Odometry sequence 02", "Paired differences"):
         assert part in report
-    assert "| untrained | 1 |" in report and "| baseline | 1 |" in report and "| cyc | 1 |" in report
+    assert (
+        "| untrained | 1 |" in report
+        and "| renderer_depth | 1 |" in report
+        and "| baseline | 1 |" in report
+        and "| cyc | 1 |" in report
+    )
     assert "| mean σ/μ | cyc | 1 |" in report and "interval not meaningful" in report
     for plot in ("scale_boxplot.png", "scale_over_time.png", "paired_differences.png"):
         assert (results / plot).stat().st_size > 1000 and f"results/{plot}" in report
@@ -92,7 +99,13 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert main(argv + ["--report", str(docs)]) == 0  # everything done: trains nothing, writes the report
     assert len(calls) == 3
     copies = sorted(p.name for p in (tmp_path / "docs/results/json").glob("[!.]*.json"))
-    assert copies == ["baseline_seed0.json", "cyc_seed0.json", "study.json", "untrained_seed0.json"]
+    assert copies == [
+        "baseline_seed0.json",
+        "cyc_seed0.json",
+        "renderer_depth_seed0.json",
+        "study.json",
+        "untrained_seed0.json",
+    ]
     again = tmp_path / "elsewhere" / "r.md"
     assert (
         main(["study", "--report-only", "--results", str(tmp_path / "docs/results/json"), "--report", str(again)]) == 0

@@ -17,7 +17,7 @@ from typing import Any
 from ..errors import PoseconsError
 from ..fileio import output_dir, write_text
 from ..metrics.stats import MIN_SEEDS, mean_std, paired_differences, summarise_differences
-from .spec import UNTRAINED
+from .spec import FLOOR, UNTRAINED
 
 STUDY_FILE = "study.json"
 Getter = Callable[[dict], Any]
@@ -269,12 +269,12 @@ def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
     from ..plots import plot_paired_differences
 
     variants = list(study["variants"])
-    names = [UNTRAINED] + variants
+    names = [UNTRAINED] + ([FLOOR] if any(r["variant"] == FLOOR for r in results) else []) + variants
     missing, untrained_missing, done = _missing(study, results)
     runs = len(study["seeds"]) * len(variants)
     envs = [r["environment"] for r in results if "environment" in r]
     code = "; ".join(dict.fromkeys(f"commit `{e['commit']}` on {e['machine']} (torch {e['torch']})" for e in envs))
-    trained = [r for r in results if r["variant"] != UNTRAINED]
+    trained = [r for r in results if r["variant"] not in (UNTRAINED, FLOOR)]
     overview = _table(
         ["variant", "overrides (after the spec's)", "runs done", "steps", "train minutes"],
         [
@@ -297,7 +297,8 @@ def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
 - generated: {datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")}
 - runs done: {done} of {runs}{"; missing: " + ", ".join(missing) if missing else ""}{"; untrained missing for seeds " + ", ".join(untrained_missing) if untrained_missing else ""}
 - weights evaluated: each run's `checkpoints/last.pt`, the last step (no model selection, no ground truth);
-  `untrained` is the initial network of each seed
+  `untrained` is the initial network of each seed; `renderer_depth` (synthetic data) is the renderer's
+  exact depth evaluated as a prediction, the floor no network can beat here
 - cells: mean ± sample std over the seeds done (n); one value when n = 1
 
 {overview}"""

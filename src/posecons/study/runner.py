@@ -33,15 +33,16 @@ import yaml
 
 from ..checkpoint import describe_checkpoint
 from ..config import Config, config_from_dict
-from ..data.gt import export_gt
+from ..data.gt import export_gt, load_gt
 from ..data.splits import SplitLine, read_split
 from ..data.synth import generate_synth
+from ..data.synth.oracle import oracle_disparities
 from ..errors import Interrupted, PoseconsError
 from ..evaluation import evaluate
 from ..fileio import write_json
 from ..training.trainer import save_initial_weights, train
 from .report import STUDY_FILE, read_json, write_report
-from .spec import UNTRAINED, StudySpec
+from .spec import FLOOR, UNTRAINED, StudySpec
 
 SCALINGS = ("frame", "sequence")
 
@@ -173,6 +174,19 @@ def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
     return {"depth": depth, "pose": pose, "test_lines": [str(line) for line in data.split]}
 
 
+def depth_floor(spec: StudySpec, data: StudyData) -> dict[str, Any]:
+    """The renderer's exact depth at the network size, evaluated like a run: what resizing, sparse
+    LiDAR and the crop leave of each metric (and of σ/μ) for a perfect depth network."""
+    m = spec.config(spec.reference, spec.seeds[0]).model
+    disps = oracle_disparities(data.train_path, data.split, m.height, m.width)
+    gts, _ = load_gt(data.gt)
+    name = f"the renderer's depth at {m.width}×{m.height}"
+    depth = {
+        s: evaluate.depth_result(disps, gts, data.split, s, pred_name=name, gt_name=str(data.gt)) for s in SCALINGS
+    }
+    return {"variant": FLOOR, "seed": 0, "depth": depth}
+
+
 def _train(config: Config, data: StudyData, run_dir: Path, accelerator: str, quiet: bool) -> dict:
     """Train a run, resume an interrupted one, or read the summary of a finished one."""
     summary, last = run_dir / "train_summary.json", run_dir / "checkpoints" / "last.pt"
@@ -210,6 +224,11 @@ def run_study(
             result.update(config=config.to_dict(), checkpoint=describe_checkpoint(weights), train_minutes=0, steps=0)
             write_json(target, {**result, **evaluate_weights(weights, data), "environment": env, "finished": _now()})
             progress.line(f"evaluated the untrained network of seed {seed}")
+
+    floor = results / result_name(FLOOR, 0)
+    if "synth" in spec.data and not floor.is_file():
+        write_json(floor, {**depth_floor(spec, data), "environment": env, "finished": _now()})
+        progress.line("evaluated the renderer's own depth (the floor of every depth metric)")
 
     for variant, seed in todo:
         run_dir = out / "runs" / variant / f"seed{seed}"

@@ -36,6 +36,7 @@ KEYS = {"preset", "overrides", "data", "seeds", "variants"}
 SYNTH_ARGS = ("drives", "frames", "width", "height", "neighbours", "seed", "ext")  # generate_synth's; ext optional
 PATH_KEYS = {"path", "test_split", "odometry", "odometry_sequences"}
 UNTRAINED = "untrained"  # the name of the reference row: no variant may take it
+FLOOR = "renderer_depth"  # synthetic data: the renderer's own depth evaluated as a prediction (the floor)
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")  # variant names become folder and file names
 
 
@@ -186,9 +187,9 @@ def _variants(variants: Any) -> dict[str, list[str]]:
         raise PoseconsError(f"variants must be a non-empty mapping of name → overrides, got {variants!r}")
     out = {}
     for name, overrides in variants.items():
-        if not isinstance(name, str) or not NAME.fullmatch(name) or name == UNTRAINED:
+        if not isinstance(name, str) or not NAME.fullmatch(name) or name in (UNTRAINED, FLOOR):
             raise PoseconsError(
-                f"variant name {name!r}: use letters, digits, '_', '.', '-' (it names folders), not {UNTRAINED!r}"
+                f"variant name {name!r}: use letters, digits, '_', '.', '-' (it names folders), not {UNTRAINED!r} or {FLOOR!r}"
             )
         out[name] = _strings(overrides, f"variant {name!r}")
     return out
