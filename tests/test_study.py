@@ -154,6 +154,11 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         assert spec.reference == "baseline" and spec.seeds == [0, 1, 2]
         assert spec.config("baseline", 2).loss.constraints == [] and spec.config("cyc", 1).train.seed == 1
     assert load_spec(copy, data_path=tmp_path).data["test_split"].endswith("eigen/test_files.txt")
+    subset = spec.select(["cyc", "baseline"], [3, 4, 5])  # the spec's order: the reference stays first
+    assert list(subset.variants) == ["baseline", "cyc"] and subset.runs()[:2] == [("baseline", 3), ("cyc", 3)]
+    assert spec.select(None, None) == spec
+    with pytest.raises(PoseconsError, match="--variants 'cycle': not in kitti_gpu.yaml"):
+        spec.select(["cycle"])
     assert not any(name.startswith("study/") for name in preset_names())
     with pytest.raises(PoseconsError, match="neither a file nor a bundled preset"):
         resolve_preset("study/synth")

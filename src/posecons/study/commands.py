@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..cli import output_file, output_folder
+from ..cli import non_negative_int, output_file, output_folder
 from ..errors import PoseconsError
 
 
@@ -29,6 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--results", type=Path, metavar="DIR", help="with --report-only: the folder of JSONs (default OUT/results)"
     )
+    p.add_argument("--variants", nargs="+", metavar="NAME", help="only these of the spec's variants")
+    p.add_argument("--seeds", nargs="+", type=non_negative_int, metavar="K", help="these seeds in place of the spec's")
     p.add_argument("--data-path", type=Path, help="KITTI raw root, in place of the spec's data.path")
     p.add_argument("--odometry-path", type=Path, help="KITTI odometry root, in place of the spec's data.odometry")
     p.add_argument(
@@ -48,7 +50,7 @@ def study_command(args: argparse.Namespace) -> int:
     from .runner import run_study
     from .spec import load_spec
 
-    spec = load_spec(args.spec, args.data_path, args.odometry_path)
+    spec = load_spec(args.spec, args.data_path, args.odometry_path).select(args.variants, args.seeds)
     report = args.report or args.out / "results.md"
     trained = run_study(spec, args.out, report, args.report is not None, args.accelerator, args.quiet)
     print(f"report: {report} ({trained} runs trained or resumed now, {len(spec.runs())} in the spec)")
@@ -67,7 +69,11 @@ def _report_only(args: argparse.Namespace) -> int:
         raise PoseconsError("--report-only with --results needs --report PATH (where to write the report)")
     if not results.is_dir():
         raise PoseconsError(f"--results {results}: no such folder")
-    study = load_spec(args.spec, args.data_path, args.odometry_path).describe() if args.spec else None
+    study = (
+        load_spec(args.spec, args.data_path, args.odometry_path).select(args.variants, args.seeds).describe()
+        if args.spec
+        else None
+    )
     write_report(results, report, study, publish=args.report is not None)
     print(f"report: {report}")
     return 0

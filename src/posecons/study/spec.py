@@ -22,6 +22,7 @@ one :class:`~posecons.errors.PoseconsError` naming the spec file.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,6 +66,15 @@ class StudySpec:
     def runs(self) -> list[tuple[str, int]]:
         """(variant, seed) of every run, seed by seed: a study stopped early still has complete pairs."""
         return [(variant, seed) for seed in self.seeds for variant in self.variants]
+
+    def select(self, variants: list[str] | None = None, seeds: list[int] | None = None) -> StudySpec:
+        """The spec with only ``variants`` (in the spec's order, so its reference stays first when
+        chosen) and with ``seeds`` in place of its own: e.g. more seeds for two variants."""
+        unknown = [v for v in variants or [] if v not in self.variants]
+        if unknown:
+            raise PoseconsError(f"--variants {unknown[0]!r}: not in {self.file.name} ({', '.join(self.variants)})")
+        chosen = {v: o for v, o in self.variants.items() if not variants or v in variants}
+        return dataclasses.replace(self, variants=chosen, seeds=_seeds(seeds) if seeds else self.seeds)
 
     def describe(self) -> dict[str, Any]:
         """What the report's header and the regeneration of tables need (``study.json``)."""
