@@ -109,6 +109,26 @@ def test_constraint_groups_can_use_the_temporal_groups_statistics():
     assert not torch.allclose(out[4:], own(x)[4:], atol=1e-2)  # its own statistics would differ
 
 
+@pytest.mark.parametrize("train", [False, True])
+def test_mirrored_pose_net_is_exactly_mirror_equivariant(train):
+    torch.manual_seed(4)
+    net = PoseNet(10, mirror=True).train(train)
+    a, b = torch.rand(4, 3, 64, 96), torch.rand(4, 3, 64, 96)
+    # Two groups of two pairs: each group is normalised with its own mirror images, so in training the
+    # mirrored batch has the same statistics and must give exactly the mirrored motions.
+    rot, t = net(a, b, groups=2)
+    rot_m, t_m = net(a.flip(-1), b.flip(-1), groups=2)
+    assert torch.allclose(rot_m, rot * torch.tensor([1.0, -1.0, -1.0]), atol=1e-6)  # pitch kept; yaw, roll negated
+    assert torch.allclose(t_m, t * torch.tensor([-1.0, 1.0, 1.0]), atol=1e-6)  # sideways motion negated
+    plain = PoseNet(10).train(train)
+    plain.load_state_dict(net.state_dict())
+    assert not torch.allclose(plain(a, b, groups=2)[1], t, atol=1e-4)  # the average is not the plain output
+    # ... it is the mean of the plain outputs for the pair and (mirrored back) for its mirror image
+    if not train:
+        direct, mirrored = plain(a, b), plain(a.flip(-1), b.flip(-1))
+        assert torch.allclose(t, (direct[1] + mirrored[1] * torch.tensor([-1.0, 1.0, 1.0])) / 2, atol=1e-6)
+
+
 def test_pose_batch_must_split_into_equal_groups():
     with pytest.raises(ValueError, match="5 pairs.*2 equal groups"):
         PoseNet(10)(torch.rand(5, 3, 64, 96), torch.rand(5, 3, 64, 96), groups=2)

@@ -81,6 +81,9 @@ class ModelConfig:
     # BatchNorm statistics of the pose net's constraint pairs in training: "own" (each pair group its own, as
     # separate pose-net calls would give) or "temporal" (the temporal pairs' statistics of the same step)
     constraint_norm: str = "own"
+    # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
+    # mirror-equivariant by construction (sideways motion, yaw and roll cannot hold a constant bias)
+    pose_mirror: bool = False
 
 
 @dataclass

@@ -232,13 +232,19 @@ class DepthNet(nn.Module):
         return self.decoder(self.encoder(images))
 
 
+# (axis-angle, translation) sign changes of a motion seen in the mirror image (x ↦ −x).
+MIRROR_SIGN = torch.tensor([[1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]])
+
+
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, constraint_norm: str = "own"):
+    def __init__(
+        self, num_layers: int = 18, imagenet: dict | None = None, constraint_norm: str = "own", mirror: bool = False
+    ):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, norm_layer=GroupedBatchNorm2d)
-        self.constraint_norm = constraint_norm
+        self.constraint_norm, self.mirror = constraint_norm, mirror
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
     def forward(
@@ -258,8 +264,23 @@ class PoseNet(nn.Module):
             groups = [n // groups] * groups
         if sum(groups) != n or min(groups) < 1:
             raise ValueError(f"batch of {n} pairs does not split into groups of sizes {list(groups)}")
+        pairs = torch.cat([image_a, image_b], 1)
+        if self.mirror:  # each group followed by its mirror image, so that it shares the group's statistics
+            pairs = torch.cat([torch.cat([g, g.flip(-1)]) for g in pairs.split(list(groups))])
+            groups = [2 * g for g in groups]
         for bn in self.encoder.modules():
             if isinstance(bn, GroupedBatchNorm2d):
                 bn.sizes, bn.tracked = tuple(groups), len(groups) if tracked is None else tracked
                 bn.reference = self.constraint_norm
-        return self.decoder(self.encoder(torch.cat([image_a, image_b], 1))[-1])
+        axisangle, translation = self.decoder(self.encoder(pairs)[-1])
+        if not self.mirror:
+            return axisangle, translation
+        # The mirror image of a motion (x ↦ −x) has t_x, and the axis-angle's y and z, negated: averaging
+        # each pair's pose with its mirror's mirrored pose makes the estimate exactly mirror-equivariant.
+        sign = MIRROR_SIGN.to(pairs.device)
+
+        def average(out: torch.Tensor, sign: torch.Tensor) -> torch.Tensor:
+            direct, mirrored = zip(*(g.chunk(2) for g in out.split(groups)))
+            return (torch.cat(direct) + sign * torch.cat(mirrored)) / 2
+
+        return average(axisangle, sign[0]), average(translation, sign[1])
