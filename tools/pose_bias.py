@@ -1,0 +1,60 @@
+"""How a checkpoint's pose net moves on a test sequence: whether its translation follows the true
+motion (correlation of |t| with the true distance, cosine with the true direction) and whether its
+mirror-odd outputs — sideways translation t_x, yaw and roll — flip sign for mirrored frames, as they
+must for a horizontally symmetric world. A pose net that outputs the same t_x for a pair and for its
+mirror image has learnt a constant bias, not motion (docs/results.md).
+
+    python tools/pose_bias.py --odometry DATA/odometry --sequence 05 RUN/checkpoints/last.pt [...]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from posecons.data.kitti_odometry import list_sequence_frames
+from posecons.data.trajectory_io import read_kitti_poses
+from posecons.inference.backend import load_predictor, predict_batches
+from posecons.inference.io import frames_from_paths
+
+
+def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> dict[str, float]:
+    """Statistics of T_{i+stride←i} from the pose net against the ground truth, for the frames and
+    their mirror images."""
+    predictor = load_predictor(checkpoint, "cpu")
+    frames = frames_from_paths(list_sequence_frames(odometry, sequence))
+    images = torch.from_numpy(np.concatenate([x for _, x, _ in predict_batches(predictor, frames, 32, depth=False)]))
+    gt = read_kitti_poses(odometry / "poses" / f"{int(sequence):02d}.txt")
+    true = (np.linalg.inv(gt[stride:]) @ gt[:-stride])[:, :3, 3]  # t of T_{i+s←i}
+    a, b = images[:-stride], images[stride:]
+    with torch.no_grad():
+        rot, t = (x[:, 0].double().numpy() for x in predictor.model.pose_net(a, b))
+        rot_m, t_m = (x[:, 0].double().numpy() for x in predictor.model.pose_net(a.flip(-1), b.flip(-1)))
+    norm = np.linalg.norm(t, axis=1)
+    return {
+        "corr_speed": float(np.corrcoef(norm, np.linalg.norm(true, axis=1))[0, 1]),
+        "cos_direction": float(np.mean((t * true).sum(1) / norm / np.linalg.norm(true, axis=1))),
+        "tx_over_t": float(np.mean(t[:, 0] / norm)),
+        "tx_over_t_mirrored": float(np.mean(t_m[:, 0] / np.linalg.norm(t_m, axis=1))),
+        "yaw_mrad": 1e3 * float(rot[:, 1].mean()),
+        "yaw_mrad_mirrored": 1e3 * float(rot_m[:, 1].mean()),
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("checkpoints", nargs="+", type=Path)
+    p.add_argument("--odometry", type=Path, required=True, help="odometry root (sequences/, poses/)")
+    p.add_argument("--sequence", required=True)
+    p.add_argument("--stride", type=int, default=3, help="frame offset of the pairs (the training offset)")
+    args = p.parse_args()
+    for ckpt in args.checkpoints:
+        stats = pose_bias(ckpt, args.odometry, args.sequence, args.stride)
+        print(f"{ckpt}: " + ", ".join(f"{k} {v:+.3f}" for k, v in stats.items()))
+
+
+if __name__ == "__main__":
+    main()
