@@ -2,7 +2,9 @@
 motion (correlation of |t| with the true distance, cosine with the true direction) and whether its
 mirror-odd outputs — sideways translation t_x, yaw and roll — flip sign for mirrored frames, as they
 must for a horizontally symmetric world. A pose net that outputs the same t_x for a pair and for its
-mirror image has learnt a constant bias, not motion (docs/results.md).
+mirror image has learnt a constant bias, not motion (docs/results.md). For the depth net: the mean
+disparity of the left and right image halves, and how far the depth of the mirrored frame, mirrored
+back, is from the frame's own (0 for a mirror-symmetric network).
 
     python tools/pose_bias.py --odometry DATA/odometry --sequence 05 RUN/checkpoints/last.pt [...]
 """
@@ -33,7 +35,10 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
     with torch.no_grad():
         rot, t = (x[:, 0].double().numpy() for x in predictor.model.pose_net(a, b))
         rot_m, t_m = (x[:, 0].double().numpy() for x in predictor.model.pose_net(a.flip(-1), b.flip(-1)))
+        disp = predictor.model.depth_net(images)[0]
+        disp_m = predictor.model.depth_net(images.flip(-1))[0].flip(-1)
     norm = np.linalg.norm(t, axis=1)
+    half = disp.shape[-1] // 2
     return {
         "corr_speed": float(np.corrcoef(norm, np.linalg.norm(true, axis=1))[0, 1]),
         "cos_direction": float(np.mean((t * true).sum(1) / norm / np.linalg.norm(true, axis=1))),
@@ -41,6 +46,9 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
         "tx_over_t_mirrored": float(np.mean(t_m[:, 0] / np.linalg.norm(t_m, axis=1))),
         "yaw_mrad": 1e3 * float(rot[:, 1].mean()),
         "yaw_mrad_mirrored": 1e3 * float(rot_m[:, 1].mean()),
+        "disp_left": float(disp[..., :half].mean()),
+        "disp_right": float(disp[..., half:].mean()),
+        "disp_mirror_gap": float((disp - disp_m).abs().mean()),
     }
 
 
