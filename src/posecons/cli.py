@@ -78,6 +78,13 @@ output_file = _writable(folder=False)
 output_folder = _writable(folder=True)
 
 
+def add_overrides(parser: argparse.ArgumentParser, example: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` config override of the commands that build a config."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=f"{example} (repeatable)"
+    )
+
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Every option's help ends with its default, unless it has none or the text already says it."""
 

@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..cli import finite_float, fraction, non_negative_int, output_file, output_folder, positive_float, positive_int
+from ..cli import (
+    add_overrides,
+    finite_float,
+    fraction,
+    non_negative_int,
+    output_file,
+    output_folder,
+    positive_float,
+    positive_int,
+)
 from ..errors import PoseconsError
 
 # The library modules are imported inside each command: `posecons --help` must not pay for torch or av.
@@ -84,14 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--data-path", type=Path, required=True, help="dataset root (KITTI raw layout, or odometry root)")
     p.add_argument("--config", required=True, help="preset file or bundled name (e.g. kitti/cycle)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config value as for train, e.g. --set model.height=96 (repeatable)",
-    )
+    add_overrides(p, "override a config value as for train, e.g. --set model.height=96")
     p.add_argument("--split-dir", type=Path, help="folder with train_files.txt/val_files.txt (as for train)")
     p.add_argument(
         "--out", type=output_folder, required=True, help="cache folder: new, empty, or an unfinished cache to complete"

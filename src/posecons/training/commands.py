@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..cli import non_negative_int, output_folder, positive_int
+from ..cli import add_overrides, non_negative_int, output_folder, positive_int
 from ..config import load_config, resolve_preset
 from ..errors import PoseconsError
 
@@ -27,14 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--max-steps", type=non_negative_int, help="stop after this many optimiser steps (default: train.max_steps)"
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config value, e.g. --set loss.constraints=[cyc] (repeatable)",
-    )
+    add_overrides(p, "override a config value, e.g. --set loss.constraints=[cyc]")
     p.add_argument("--resume", action="store_true", help="continue RUN/checkpoints/last.pt exactly")
     p.add_argument("--devices", type=positive_int, default=1, help="processes (one GPU each) per node")
     p.add_argument("--nodes", type=positive_int, default=1, help="machines taking part; each runs this command")
