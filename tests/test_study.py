@@ -159,6 +159,8 @@ def test_spec_checks_and_bundled_specs(tmp_path):
     assert spec.select(None, None) == spec
     with pytest.raises(PoseconsError, match="--variants 'cycle': not in kitti_gpu.yaml"):
         spec.select(["cycle"])
+    with pytest.raises(PoseconsError, match="--seeds: seeds must be distinct"):
+        spec.select(None, [1, 1])
     assert not any(name.startswith("study/") for name in preset_names())
     with pytest.raises(PoseconsError, match="neither a file nor a bundled preset"):
         resolve_preset("study/synth")

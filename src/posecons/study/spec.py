@@ -74,7 +74,10 @@ class StudySpec:
         if unknown:
             raise PoseconsError(f"--variants {unknown[0]!r}: not in {self.file.name} ({', '.join(self.variants)})")
         chosen = {v: o for v, o in self.variants.items() if not variants or v in variants}
-        return dataclasses.replace(self, variants=chosen, seeds=_seeds(seeds) if seeds else self.seeds)
+        try:
+            return dataclasses.replace(self, variants=chosen, seeds=_seeds(seeds) if seeds else self.seeds)
+        except PoseconsError as exc:
+            raise PoseconsError(f"--seeds: {exc}") from None
 
     def describe(self) -> dict[str, Any]:
         """What the report's header and the regeneration of tables need (``study.json``)."""
