@@ -117,6 +117,26 @@ def test_resume_with_ema_gives_the_uninterrupted_weights(synth_data, tmp_path):
     assert any(not torch.equal(v, full["raw_model"][k]) for k, v in full["model"].items())
 
 
+def test_warmup_ramps_the_scheduled_rate_across_an_lr_decay_and_resumes_on_the_ramp(synth_data, tmp_path):
+    lr, sets = 1e-3, ["train.val_every=off", "train.checkpoint_every=1", "train.lr_decay_epochs=[1]", "train.epochs=3"]
+    spe = Trainer(tiny_config(*sets), synth_data, tmp_path / "probe", quiet=True).steps_per_epoch
+    warmup, steps = spe + 2, spe + 4  # the decay after epoch 1 falls inside the warm-up
+
+    def rates(run: Path, max_steps: int, resume: bool = False) -> list[float]:
+        cfg = tiny_config(*sets, f"train.lr={lr}", f"train.warmup_steps={warmup}", f"train.max_steps={max_steps}")
+        trainer = Trainer(cfg, synth_data, run, resume=resume, quiet=True)
+        used = []
+        trainer.optimizer.register_step_pre_hook(lambda opt, *_: used.append(opt.param_groups[0]["lr"]))
+        trainer.fit()
+        assert trainer.optimizer.param_groups[0]["lr"] == trainer.scheduler.get_last_lr()[0]  # restored after each step
+        return used
+
+    used = rates(tmp_path / "full", steps)
+    want = [lr * (0.1 if k > spe else 1) * min(1, k / warmup) for k in range(1, steps + 1)]
+    assert used == pytest.approx(want, rel=1e-12)
+    assert rates(tmp_path / "part", 2) + rates(tmp_path / "part", steps, resume=True) == pytest.approx(want, rel=1e-12)
+
+
 def metrics_at_best(run: Path, key: str) -> float:
     return min(json.loads(line)[key] for line in (run / "metrics.jsonl").read_text().splitlines())
 

@@ -57,6 +57,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     "train.lr_decay_epochs": (lambda v: all(e >= 1 for e in v), "must be epochs ≥ 1"),
     "train.lr_decay": _POSITIVE,
     "train.grad_accum": _at_least(1),
+    "train.warmup_steps": _at_least(0),
     "train.seed": _at_least(0),
     "train.max_steps": _at_least(0),
     "train.log_every": _at_least(1),
@@ -131,6 +132,7 @@ class TrainConfig:
     epochs: int = 20
     lr_decay_epochs: list[int] = field(default_factory=lambda: [15])  # lr × lr_decay at these epochs
     lr_decay: float = 0.1
+    warmup_steps: int = 0  # linear learning-rate warm-up over the first steps; 0: none (Monodepth2)
     grad_accum: int = 1
     seed: int = 0
     deterministic: bool = False

@@ -474,13 +474,39 @@ class Trainer:
             self.scaler.scale(losses["total"] / t.grad_accum).backward()
         if not last:
             return None, outputs
-        self.scaler.step(self.optimizer)
+        with self._warmup():
+            self.scaler.step(self.optimizer)
         self.scaler.update()
         if self.ema is not None:  # AveragedModel's first update copies the weights, then ema ← d·ema + (1 − d)·w
             self.ema.update_parameters(self.model)
         self.optimizer.zero_grad(set_to_none=True)
         self.bad_steps = 0
         return {k: float(v.detach()) for k, v in losses.items()}, outputs
+
+    @contextlib.contextmanager
+    def _warmup(self):
+        """The learning rate × (step / train.warmup_steps) during the first steps, on top of the
+        epoch schedule, which sees (and saves) only its own rate. From scratch, Adam's first
+        updates are lr-sized on every weight at once: without warm-up the pose net's translation
+        grows fivefold in one step, far beyond the range where the photometric gradient tells
+        forward from backward (docs/results.md §3)."""
+        factor = self._warmup_factor(self.step + 1)
+        if factor == 1.0:
+            yield
+            return
+        groups, rates = self.optimizer.param_groups, self.scheduler.get_last_lr()
+        for group, lr in zip(groups, rates):
+            group["lr"] = lr * factor
+        try:
+            yield
+        finally:
+            for group, lr in zip(groups, rates):
+                group["lr"] = lr
+
+    def _warmup_factor(self, step: int) -> float:
+        """The share of the scheduled learning rate that step ``step`` (counted from 1) uses."""
+        warmup = self.config.train.warmup_steps
+        return min(1.0, step / warmup) if warmup else 1.0
 
     def _skip_step(self) -> None:
         self.optimizer.zero_grad(set_to_none=True)
@@ -501,7 +527,12 @@ class Trainer:
         if self.step % t.log_every == 0 or self.step == 1:
             for k, v in losses.items():
                 self.writer.add_scalar(f"loss/{k}", v, self.step)
-            self.writer.add_scalar("lr", self.optimizer.param_groups[0]["lr"], self.step)
+            lr = self.optimizer.param_groups[0]["lr"] * self._warmup_factor(self.step)  # of the step just taken
+            self.writer.add_scalar("lr", lr, self.step)
+            # The two signs of a run collapsing from scratch (docs/results.md §3): the auto-mask
+            # hiding most pixels, and disparities pinned at the far end of the range.
+            self.writer.add_scalar("mask/warped_fraction", outputs["automask"].float().mean(), self.step)
+            self.writer.add_scalar("mask/far_fraction", (outputs["disp"][0] < 0.01).float().mean(), self.step)
         if t.image_every and self.step % t.image_every == 0:
             self.writer.add_image("input", batch["frames"][0, 0], self.step)
             disp = outputs["disp"][0][0].detach().float()
