@@ -1,0 +1,52 @@
+"""The first training steps of a recipe, step by step: the batch's mean translation of T_{f←0} for
+each source, the disparity's mean and its far-saturated share, and the share of pixels where a
+warped source beats the unwarped one (the auto-mask). A run from scratch settles its direction of
+motion in these steps; for forward driving the translation's z of T_{−n←0} must be positive
+(camera −n is behind), and a run that points it backwards or pins the disparity at the far end
+collapses (docs/results.md §3).
+
+    python tools/early_steps.py --config synth/study --data-path DATA --steps 60 --set train.seed=1
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+from posecons.cli import add_overrides
+from posecons.config import load_config, resolve_preset
+from posecons.training.trainer import Trainer
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--config", required=True, help="preset name or YAML file")
+    p.add_argument("--data-path", required=True)
+    p.add_argument("--steps", type=int, default=60, help="at most one epoch")
+    add_overrides(p, "a config override such as train.warmup_steps=0")
+    args = p.parse_args()
+    config = load_config(resolve_preset(args.config), args.overrides)
+    sources = config.model.frame_ids[1:]
+    print("| step | photometric | " + " | ".join(f"t of T_{{{f}←0}} (x, y, z)" for f in sources), end="")
+    print(" | disparity mean | far share | warped share |\n|" + "---|" * (len(sources) + 5))
+    with tempfile.TemporaryDirectory() as out:
+        trainer = Trainer(config, args.data_path, Path(out) / "run", quiet=True)
+        for batch in trainer._loader(0, 0):
+            losses, outputs = trainer._micro_step(batch, last=True)
+            trainer.step += 1
+            disp = outputs["disp"][0].detach()
+            t = [outputs["poses"][f][:, :3, 3].mean(0).tolist() for f in sources]
+            print(
+                f"| {trainer.step} | {losses['photometric']:.4f} | "
+                + " | ".join(", ".join(f"{v:+.2e}" for v in xyz) for xyz in t)
+                + f" | {disp.mean():.3f} | {(disp < 0.01).float().mean():.2f} | "
+                f"{outputs['automask'].float().mean():.2f} |",
+                flush=True,
+            )
+            if trainer.step >= args.steps:
+                break
+
+
+if __name__ == "__main__":
+    main()
