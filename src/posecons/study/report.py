@@ -231,7 +231,9 @@ def _figure1(variants: Sequence[str], results: Sequence[dict], figures: Path) ->
     scales = {v: [math.nan if s is None else s for s in runs[v]["depth"]["frame"]["scales"]] for v in chosen}
     plot_scale_boxplots(scales, sequences, figures / "scale_boxplot.png", normalise=True)
     plot_scales_over_time(scales, sequences, frames, figures / "scale_over_time.png", count=3, normalise=True)
-    which = f"**{chosen[0]}** (reference)" + (f" and **{chosen[1]}** (lowest mean σ/μ)" if len(chosen) > 1 else "")
+    which = f"**{chosen[0]}** (reference)" + (
+        f" and **{chosen[1]}** (of the other variants, the lowest mean σ/μ)" if len(chosen) > 1 else ""
+    )
     return (
         f"{which}, seed {seed}. Each run's per-frame scales median(gt)/median(pred), divided by their "
         "median over the test set (a monocular network's overall scale is arbitrary; the spread is what "
