@@ -16,7 +16,7 @@ from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
-from posecons.training.trainer import Trainer, train
+from posecons.training.trainer import Trainer, collapse_signs, train
 
 pytestmark = pytest.mark.slow
 TINY = [
@@ -135,6 +135,16 @@ def test_warmup_ramps_the_scheduled_rate_across_an_lr_decay_and_resumes_on_the_r
     want = [lr * (0.1 if k > spe else 1) * min(1, k / warmup) for k in range(1, steps + 1)]
     assert used == pytest.approx(want, rel=1e-12)
     assert rates(tmp_path / "part", 2) + rates(tmp_path / "part", steps, resume=True) == pytest.approx(want, rel=1e-12)
+
+
+def test_collapse_signs_count_warped_pixels_and_far_pinned_disparities():
+    disp = torch.full((2, 1, 4, 4), 0.5)
+    disp[0, 0, 0] = 0.005  # 4 of 32 pixels pinned at the far end (small sigmoid = small disparity = far)
+    disp[1, 0, 1, :2] = 0.995  # near-saturated pixels are not far
+    automask = torch.zeros(2, 4, 4, dtype=torch.bool)
+    automask[:, :3] = True  # a warped source won on 24 of 32 pixels
+    signs = collapse_signs({"disp": {0: disp}, "automask": automask})
+    assert signs == {"warped_fraction": 0.75, "far_fraction": 0.125}
 
 
 def metrics_at_best(run: Path, key: str) -> float:

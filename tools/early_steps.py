@@ -16,7 +16,7 @@ from pathlib import Path
 
 from posecons.cli import add_overrides
 from posecons.config import load_config, resolve_preset
-from posecons.training.trainer import Trainer
+from posecons.training.trainer import Trainer, collapse_signs
 
 
 def main() -> None:
@@ -35,13 +35,12 @@ def main() -> None:
         for batch in trainer._loader(0, 0):
             losses, outputs = trainer._micro_step(batch, last=True)
             trainer.step += 1
-            disp = outputs["disp"][0].detach()
             t = [outputs["poses"][f][:, :3, 3].mean(0).tolist() for f in sources]
+            signs = collapse_signs(outputs)
             print(
                 f"| {trainer.step} | {losses['photometric']:.4f} | "
                 + " | ".join(", ".join(f"{v:+.2e}" for v in xyz) for xyz in t)
-                + f" | {disp.mean():.3f} | {(disp < 0.01).float().mean():.2f} | "
-                f"{outputs['automask'].float().mean():.2f} |",
+                + f" | {outputs['disp'][0].mean():.3f} | {signs['far_fraction']:.2f} | {signs['warped_fraction']:.2f} |",
                 flush=True,
             )
             if trainer.step >= args.steps:

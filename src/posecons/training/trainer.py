@@ -529,10 +529,8 @@ class Trainer:
                 self.writer.add_scalar(f"loss/{k}", v, self.step)
             lr = self.optimizer.param_groups[0]["lr"] * self._warmup_factor(self.step)  # of the step just taken
             self.writer.add_scalar("lr", lr, self.step)
-            # The two signs of a run collapsing from scratch (docs/results.md §3): the auto-mask
-            # hiding most pixels, and disparities pinned at the far end of the range.
-            self.writer.add_scalar("mask/warped_fraction", outputs["automask"].float().mean(), self.step)
-            self.writer.add_scalar("mask/far_fraction", (outputs["disp"][0] < 0.01).float().mean(), self.step)
+            for k, v in collapse_signs(outputs).items():
+                self.writer.add_scalar(f"mask/{k}", v, self.step)
         if t.image_every and self.step % t.image_every == 0:
             self.writer.add_image("input", batch["frames"][0, 0], self.step)
             disp = outputs["disp"][0][0].detach().float()
@@ -556,6 +554,16 @@ class Trainer:
             self.best = score
             self.save_weights("best.pt", selected_by=self.config.train.best_metric)
         return metrics
+
+
+def collapse_signs(outputs: dict) -> dict[str, float]:
+    """The two signs of a run collapsing from scratch (docs/results.md §3), from the model's outputs:
+    the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the rest
+    from the loss), and the share of full-scale disparities pinned at the far end (sigmoid < 0.01)."""
+    return {
+        "warped_fraction": float(outputs["automask"].float().mean()),
+        "far_fraction": float((outputs["disp"][0].detach() < 0.01).float().mean()),
+    }
 
 
 def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
