@@ -156,6 +156,8 @@ def test_spec_checks_and_bundled_specs(tmp_path):
     assert load_spec(copy, data_path=tmp_path).data["test_split"].endswith("eigen/test_files.txt")
     subset = spec.select(["cyc", "baseline"], [3, 4, 5])  # the spec's order: the reference stays first
     assert list(subset.variants) == ["baseline", "cyc"] and subset.runs()[:2] == [("baseline", 3), ("cyc", 3)]
+    # Without the reference named, it is kept: the untrained row and the differences are its.
+    assert list(spec.select(["all", "id"]).variants) == ["baseline", "id", "all"]
     assert spec.select(None, None) == spec
     with pytest.raises(PoseconsError, match="--variants 'cycle': not in kitti_gpu.yaml"):
         spec.select(["cycle"])

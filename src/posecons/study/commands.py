@@ -29,7 +29,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--results", type=Path, metavar="DIR", help="with --report-only: the folder of JSONs (default OUT/results)"
     )
-    p.add_argument("--variants", nargs="+", metavar="NAME", help="only these of the spec's variants")
+    p.add_argument(
+        "--variants", nargs="+", metavar="NAME", help="only these of the spec's variants, and its reference (the first)"
+    )
     p.add_argument("--seeds", nargs="+", type=non_negative_int, metavar="K", help="these seeds in place of the spec's")
     p.add_argument("--data-path", type=Path, help="KITTI raw root, in place of the spec's data.path")
     p.add_argument("--odometry-path", type=Path, help="KITTI odometry root, in place of the spec's data.odometry")

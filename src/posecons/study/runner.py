@@ -161,7 +161,8 @@ def environment(accelerator: str) -> dict[str, str]:
     """Code and machine of a run, for the report's header."""
     import torch
 
-    machine = f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU threads"
+    # The compute threads, since a study may run several runs side by side at fewer threads each.
+    machine = f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU threads, {torch.get_num_threads()} used"
     if accelerator != "cpu" and torch.cuda.is_available():
         machine += f", {torch.cuda.get_device_name()}"
     return {"commit": _commit(), "machine": machine, "python": platform.python_version(), "torch": torch.__version__}

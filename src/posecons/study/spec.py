@@ -68,12 +68,13 @@ class StudySpec:
         return [(variant, seed) for seed in self.seeds for variant in self.variants]
 
     def select(self, variants: list[str] | None = None, seeds: list[int] | None = None) -> StudySpec:
-        """The spec with only ``variants`` (in the spec's order, so its reference stays first when
-        chosen) and with ``seeds`` in place of its own: e.g. more seeds for two variants."""
+        """The spec with only ``variants`` and the reference (in the spec's order: the untrained row
+        and every paired difference are defined by the reference, which a finished run skips) and
+        with ``seeds`` in place of its own: e.g. more seeds for two variants."""
         unknown = [v for v in variants or [] if v not in self.variants]
         if unknown:
             raise PoseconsError(f"--variants {unknown[0]!r}: not in {self.file.name} ({', '.join(self.variants)})")
-        chosen = {v: o for v, o in self.variants.items() if not variants or v in variants}
+        chosen = {v: o for v, o in self.variants.items() if not variants or v in variants or v == self.reference}
         try:
             return dataclasses.replace(self, variants=chosen, seeds=_seeds(seeds) if seeds else self.seeds)
         except PoseconsError as exc:
