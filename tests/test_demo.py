@@ -22,9 +22,9 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
         assert key in saved and saved[key] == summary[key] and saved[key] >= 0
     report = (out / "report.md").read_text()
     assert "| untrained |" in report and "| trained (cyc) |" in report and "constant velocity" in report
-    # The demo preset selects best.pt by ground truth on purpose, and the report says so.
-    assert saved["checkpoint"]["selected_by"] == "lowest validation abs_rel (ground truth)"
-    assert "best.pt, step 3; selected by: lowest validation abs_rel (ground truth)" in report
+    # The demo evaluates the last step, chosen without ground truth, and the report says so.
+    assert saved["checkpoint"]["selected_by"] == "none: the weights at that step"
+    assert "last.pt, step 3; selected by: none: the weights at that step" in report
     for plot in (
         "validation.png",
         "scale_boxplot.png",
