@@ -14,6 +14,7 @@ from posecons.metrics.depth import (
     garg_crop_bounds,
     resize_disparity,
     scale_consistency,
+    scale_vs_scene_depth,
     valid_mask,
 )
 
@@ -147,3 +148,18 @@ def test_drift_stats_ignore_nan_and_measure_the_deviation_from_the_chosen_scale(
     assert stats["frames"] == 3 and stats["max_rel_deviation"] == pytest.approx(0.5)
     assert stats["cv"] == pytest.approx(np.std([1.0, 2.0, 3.0]) / 2.0)
     assert drift_stats(np.array([np.nan]), 1.0) == {}
+
+
+def test_scale_vs_scene_depth_separates_scene_dependence_from_the_rest():
+    depth = np.array([5.0, 8.0, 12.0, 20.0, 9.0, 6.0])
+    # Compressed depth, pred ∝ gt^0.6: the scale is 2·gt^0.4, all of it explained by the scene.
+    r = scale_vs_scene_depth(2 * depth**0.4, depth, ["a"] * 6)
+    assert r["slope"] == pytest.approx(0.4) and r["corr"] == pytest.approx(1.0) and r["scale_cv_rest"] < 1e-12
+    # Scales independent of the scene (alternating): slope 0, the whole σ/μ remains, jitter ≈ 0.1.
+    alternating = np.array([1.0, 1.2, 1.0, 1.2])
+    r = scale_vs_scene_depth(alternating, [7.0] * 4, ["b"] * 4)
+    assert r["slope"] == 0.0 and r["scale_cv_rest"] == pytest.approx(alternating.std() / alternating.mean())
+    assert r["jitter"] == pytest.approx(np.log(1.2) / np.sqrt(2))
+    # Per sequence, then averaged: a scene-dependent and a constant sequence.
+    both = scale_vs_scene_depth([*(2 * depth**0.4), 3.0, 3.0, 3.0], [*depth, 4.0, 9.0, 16.0], ["a"] * 6 + ["c"] * 3)
+    assert both["slope"] == pytest.approx(0.2) and both["scale_cv_rest"] < 1e-12

@@ -157,6 +157,29 @@ def scale_consistency(scales: Sequence[float], sequences: Sequence[str]) -> dict
     }
 
 
+def scale_vs_scene_depth(scales: Sequence[float], scene_depths: Sequence[float], sequences: Sequence[str]) -> dict:
+    """How much of the per-frame scale variation follows the scene: per sequence, the least-squares
+    slope of log scale on log scene depth (the frame's median ground-truth depth) and their
+    correlation, σ/μ of the scale with that dependence divided out, and the frame-to-frame jitter
+    rms(log s_{i+1} − log s_i)/√2 (σ for independent noise of σ in log s); each the mean over
+    sequences, as ``scale_cv``. Slope 0: the scale
+    ignores the scene. A depth net whose prediction grows like gt^(1−b) (compressed depth) has slope b:
+    its scale varies with how far the scene is, however consistent it is over time."""
+    scales, depths = np.log(np.asarray(scales, dtype=np.float64)), np.log(np.asarray(scene_depths, dtype=np.float64))
+    if not len(scales) == len(depths) == len(sequences):
+        raise PoseconsError(f"{len(scales)} scales, {len(depths)} scene depths, {len(sequences)} sequence names")
+    rows = []
+    for name in dict.fromkeys(sequences):
+        m = (np.asarray(sequences) == name) & np.isfinite(scales) & np.isfinite(depths)
+        s, d = scales[m], depths[m] - depths[m].mean()
+        slope = float(d @ (s - s.mean()) / (d @ d)) if d.any() else 0.0
+        corr = float(np.corrcoef(s, d)[0, 1]) if d.any() and s.std() > 0 else 0.0
+        rest = np.exp(s - slope * d)
+        rows.append((slope, corr, rest.std() / rest.mean(), np.sqrt(np.mean(np.diff(s) ** 2) / 2)))
+    slope, corr, rest_cv, jitter = np.mean(rows, axis=0)
+    return {"slope": float(slope), "corr": float(corr), "scale_cv_rest": float(rest_cv), "jitter": float(jitter)}
+
+
 def scale_factors(scales: np.ndarray, sequences: Sequence[str], scaling: str) -> np.ndarray:
     """(N,) factors that multiply each frame's predicted depth, from the (N,) frame scales (NaN = skipped)."""
     if scaling == "frame":
