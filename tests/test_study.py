@@ -148,12 +148,17 @@ def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp
 
 def test_spec_checks_and_bundled_specs(tmp_path):
     """Bundled specs are valid and are no training presets; a spec's problems name the spec file."""
-    for name in ("synth", "kitti_gpu"):
+    for name in ("synth", "synth_norm", "kitti_gpu"):
         copy = resolve_preset("synth/demo").parents[1] / "study" / f"{name}.yaml"
         spec = load_spec(copy, data_path=tmp_path if name == "kitti_gpu" else None)
         assert spec.reference == "baseline" and spec.seeds == [0, 1, 2]
         assert spec.config("baseline", 2).loss.constraints == [] and spec.config("cyc", 1).train.seed == 1
     assert load_spec(copy, data_path=tmp_path).data["test_split"].endswith("eigen/test_files.txt")
+    # synth_norm shares its baseline and cyc runs with a synth study folder: same data, same runs.
+    synth, norm = (load_spec(copy.with_name(f"{n}.yaml")) for n in ("synth", "synth_norm"))
+    assert norm.data == synth.data and norm.preset_file == synth.preset_file
+    assert all(norm.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in ("baseline", "cyc"))
+    assert norm.config("cyc_temporal", 0).model.constraint_norm == "temporal"
     subset = spec.select(["cyc", "baseline"], [3, 4, 5])  # the spec's order: the reference stays first
     assert list(subset.variants) == ["baseline", "cyc"] and subset.runs()[:2] == [("baseline", 3), ("cyc", 3)]
     # Without the reference named, it is kept: the untrained row and the differences are its.
