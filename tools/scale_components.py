@@ -1,7 +1,8 @@
 """What a study's σ/μ is made of: for each variant (mean ± std over its seeds), the mean σ/μ of the
 frame scales, how strongly the scale follows the scene's depth (log-log slope and correlation with
 the frame's median LiDAR depth), the σ/μ left once that dependence is divided out, and the
-frame-to-frame jitter (:func:`posecons.metrics.depth.scale_vs_scene_depth`; docs/results.md §4).
+frame-to-frame jitter (:func:`posecons.metrics.depth.scale_vs_scene_depth`; docs/results.md §4);
+then, seed by seed, each variant's difference from the first one named.
 
     python tools/scale_components.py --results OUT/results --gt OUT/gt/test_depth.npz baseline cyc [...]
 """
@@ -29,19 +30,26 @@ def main() -> None:
     maps, lines = load_gt(args.gt)
     scene = np.array([np.median(m[m > 0]) for m in maps])
     sequences = [line.split()[0] for line in lines]
-    print(f"{'variant':14s} seeds  σ/μ              " + "  ".join(f"{k:15s}" for k in KEYS))
+    print(f"{'variant':14s} seeds  {'σ/μ':15s}  " + "  ".join(f"{k:15s}" for k in KEYS))
+    table = {}
     for variant in args.variants:
-        rows = []
         for path in sorted(args.results.glob(f"{variant}_seed*.json")):
             depth = json.loads(path.read_text())["depth"]["frame"]
             parts = scale_vs_scene_depth(depth["scales"], scene, sequences)
-            rows.append([depth["scale_cv"], *(parts[k] for k in KEYS)])
-        if not rows:
-            print(f"{variant:14s} no results")
-            continue
-        a = np.array(rows)
-        cells = "  ".join(f"{m:+.4f} ± {s:.4f}" for m, s in zip(a.mean(0), a.std(0)))
-        print(f"{variant:14s} {len(rows):5d}  {cells}")
+            table.setdefault(variant, {})[path.stem.rsplit("_seed", 1)[1]] = [
+                depth["scale_cv"],
+                *(parts[k] for k in KEYS),
+            ]
+    for variant, by_seed in table.items():
+        a = np.array(list(by_seed.values()))
+        print(f"{variant:14s} {len(a):5d}  " + "  ".join(f"{m:+.4f} ± {s:.4f}" for m, s in zip(a.mean(0), a.std(0))))
+    reference = args.variants[0]
+    for variant in [v for v in table if v != reference and reference in table]:  # paired by seed
+        seeds = [k for k in table[variant] if k in table[reference]]
+        d = np.array([np.subtract(table[variant][k], table[reference][k]) for k in seeds])
+        if len(d):
+            cells = "  ".join(f"{m:+.4f} ({(c > 0).sum()}/{len(c)} +)" for m, c in zip(d.mean(0), d.T))
+            print(f"{variant} − {reference}".ljust(14) + f" {len(d):5d}  {cells}")
 
 
 if __name__ == "__main__":
