@@ -17,7 +17,7 @@ demo: $(STAMP)
 
 # Hours on a CPU; rerun it to continue after an interruption (docs/study.md).
 study: $(STAMP)
-	$(BIN)/posecons study --spec study/synth --out runs/study
+	$(BIN)/posecons study --spec study/synth --out runs/study --jobs 2
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -4,7 +4,10 @@ interrupted one, rebuilding the report from copied JSONs; the pairing of variant
 from __future__ import annotations
 
 import json
+import os
 import signal
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -181,3 +184,37 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         PoseconsError, match="kitti.yaml: variant 'baseline': synthetic data trains on data.split=synth"
     ):
         load_spec(bad)
+
+
+@pytest.mark.slow
+def test_jobs_run_side_by_side_in_worker_processes_and_pass_a_signal_on(tmp_path, capsys):
+    spec, out = write_spec(tmp_path / "toy.yaml"), tmp_path / "study"
+    argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu", "--jobs", "2"]
+    assert main(argv) == 0
+    threads = max(1, torch.get_num_threads() // 2)
+    for variant in ("baseline", "cyc"):
+        result = json.loads((out / "results" / f"{variant}_seed0.json").read_text())
+        assert result["steps"] == 3 and result["environment"]["machine"].endswith(f", {threads} used")
+        assert (out / "runs" / variant / "seed0" / "study.log").is_file()
+    assert "runs done: 2 of 2" in (out / "results.md").read_text()
+    assert capsys.readouterr().out.count("] done ") == 2
+
+    # SIGTERM to the study while both runs train: each saves its state and stops (long before its 400th
+    # step: a signal not passed on would let both finish), and the study says how to go on.
+    slow = write_spec(tmp_path / "slow.yaml", overrides=[*TINY[:1], "train.max_steps=400", *TINY[2:]])
+    out = tmp_path / "slow"
+    started = out / "runs" / "cyc" / "seed0" / "config.yaml"
+
+    def stop_once_training() -> None:
+        while not started.is_file():
+            time.sleep(0.2)
+        time.sleep(5)  # past the first steps
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=stop_once_training, daemon=True).start()
+    argv = ["study", "--spec", str(slow), "--out", str(out), "--quiet", "--accelerator", "cpu", "--jobs", "2"]
+    assert main(argv) == 128 + signal.SIGTERM
+    assert "stopped by SIGTERM; the runs saved their state" in capsys.readouterr().err
+    for variant in ("baseline", "cyc"):
+        assert load_checkpoint(out / "runs" / variant / "seed0" / "checkpoints" / "last.pt")["step"] >= 1
+        assert not (out / "results" / f"{variant}_seed0.json").exists()

@@ -23,6 +23,7 @@ import os
 import platform
 import signal
 import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from datetime import datetime
@@ -70,6 +71,14 @@ class Progress:
 
     def line(self, text: str) -> None:
         print(f"[study {(time.monotonic() - self.start) / 60:6.1f} min] {text}", flush=True)
+
+    def done(self, result: dict, started: float) -> None:
+        self.left -= 1
+        depth = result["depth"]["frame"]
+        self.line(
+            f"done {result['variant']} seed {result['seed']} in {(time.monotonic() - started) / 60:.1f} min: "
+            f"σ/μ {depth['scale_cv']:.4f}, abs rel {depth['abs_rel']:.3f} ({self.left} runs left)"
+        )
 
 
 def _flat(d: dict, prefix: str = "") -> dict[str, Any]:
@@ -196,11 +205,111 @@ def _train(config: Config, data: StudyData, run_dir: Path, accelerator: str, qui
     return train(config, data.train_path, run_dir, resume=last.is_file(), accelerator=accelerator, quiet=quiet)
 
 
+def train_and_evaluate(
+    spec: StudySpec, data: StudyData, out: Path, variant: str, seed: int, accelerator: str, quiet: bool, env: dict
+) -> dict[str, Any]:
+    """Train (or resume) the run (variant, seed), evaluate its last weights and write its result JSON."""
+    run_dir = out / "runs" / variant / f"seed{seed}"
+    try:
+        summary = _train(spec.config(variant, seed), data, run_dir, accelerator, quiet)
+    except Interrupted as exc:  # its state is in last.pt once the loop began; the study resumes it
+        signum = exc.exit_code - 128
+        raise Interrupted(
+            f"stopped by {signal.Signals(signum).name} during {variant} seed {seed}; run the same "
+            "`posecons study` command again to continue",
+            signum,
+        ) from None
+    last = run_dir / "checkpoints" / "last.pt"
+    result = {
+        "variant": variant,
+        "seed": seed,
+        "overrides": spec.run_overrides(variant, seed),
+        "config": yaml.safe_load((run_dir / "config.yaml").read_text()),
+        "checkpoint": describe_checkpoint(last),
+        "train_minutes": summary["minutes"],
+        "steps": summary["steps"],
+        **evaluate_weights(last, data),
+        "environment": env,
+        "finished": _now(),
+    }
+    write_json(out / "results" / result_name(variant, seed), result)
+    return result
+
+
+def _run_side_by_side(
+    spec: StudySpec, out: Path, todo: list[tuple[str, int]], jobs: int, accelerator: str, progress: Progress, refresh
+) -> None:
+    """``todo`` with ``jobs`` runs at a time, each in a process of its own (``python -m
+    posecons.study.worker``) with the CPU threads shared out: on two cores two one-thread runs get
+    more done than one two-thread run, whose threads wait on each other. A signal is passed on to the
+    runs (in sessions of their own, so a terminal's Ctrl-C reaches them once), which save and stop."""
+    import torch
+
+    threads = max(1, torch.get_num_threads() // jobs)
+    pending, running, stopped, failed = list(todo), {}, [], []
+
+    def forward(signum: int, frame: Any) -> None:
+        stopped.append(signum)
+        for proc, _, _ in running.values():
+            proc.send_signal(signum)
+
+    previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        while pending or running:
+            while pending and len(running) < jobs and not (stopped or failed):
+                variant, seed = pending.pop(0)
+                run_dir = out / "runs" / variant / f"seed{seed}"
+                run_dir.mkdir(parents=True, exist_ok=True)
+                log = open(run_dir / "study.log", "a")  # noqa: SIM115 (closed when the run ends)
+                command = [sys.executable, "-m", "posecons.study.worker", str(spec.file), str(out), variant, str(seed)]
+                command += ["--accelerator", accelerator]
+                command += [
+                    f"--{arg}-path={spec.data[k]}"
+                    for arg, k in (("data", "path"), ("odometry", "odometry"))
+                    if k in spec.data
+                ]
+                env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
+                proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+                running[variant, seed] = proc, log, time.monotonic()
+                progress.line(
+                    f"start {variant} seed {seed} → {run_dir}, {threads} thread(s) ({progress.left} runs left)"
+                )
+            time.sleep(1)
+            for (variant, seed), (proc, log, started) in list(running.items()):
+                if proc.poll() is None:
+                    continue
+                log.close()
+                del running[variant, seed]
+                if proc.returncode == 0:
+                    progress.done(read_json(out / "results" / result_name(variant, seed)), started)
+                    refresh()
+                elif not stopped:
+                    failed.append(f"{variant} seed {seed} failed (exit status {proc.returncode}; log: {log.name})")
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if stopped:
+        raise Interrupted(
+            f"stopped by {signal.Signals(stopped[0]).name}; the runs saved their state: run the same "
+            "`posecons study` command again to continue",
+            stopped[0],
+        )
+    if failed:
+        raise PoseconsError("; ".join(failed))
+
+
 def run_study(
-    spec: StudySpec, out: Path, report: Path, publish: bool = False, accelerator: str = "auto", quiet: bool = False
+    spec: StudySpec,
+    out: Path,
+    report: Path,
+    publish: bool = False,
+    accelerator: str = "auto",
+    quiet: bool = False,
+    jobs: int = 1,
 ) -> int:
-    """Every missing run of ``spec`` into ``out``, rewriting ``report`` (:func:`.report.write_report`,
-    ``publish`` as there) after each one; returns the number of runs trained or resumed."""
+    """Every missing run of ``spec`` into ``out``, ``jobs`` at a time, rewriting ``report``
+    (:func:`.report.write_report`, ``publish`` as there) after each one; returns the number of runs
+    trained or resumed."""
     check_existing(spec, out)
     results = out / "results"
 
@@ -231,39 +340,14 @@ def run_study(
         write_json(floor, {**depth_floor(spec, data), "environment": env, "finished": _now()})
         progress.line("evaluated the renderer's own depth (the floor of every depth metric)")
 
-    for variant, seed in todo:
-        run_dir = out / "runs" / variant / f"seed{seed}"
-        progress.line(f"start {variant} seed {seed} → {run_dir} ({progress.left} runs left)")
-        started = time.monotonic()
-        try:
-            summary = _train(spec.config(variant, seed), data, run_dir, accelerator, quiet)
-        except Interrupted as exc:  # its state is in last.pt once the loop began; the study resumes it
-            signum = exc.exit_code - 128
-            raise Interrupted(
-                f"stopped by {signal.Signals(signum).name} during {variant} seed {seed}; run the same "
-                "`posecons study` command again to continue",
-                signum,
-            ) from None
-        last = run_dir / "checkpoints" / "last.pt"
-        result = {
-            "variant": variant,
-            "seed": seed,
-            "overrides": spec.run_overrides(variant, seed),
-            "config": yaml.safe_load((run_dir / "config.yaml").read_text()),
-            "checkpoint": describe_checkpoint(last),
-            "train_minutes": summary["minutes"],
-            "steps": summary["steps"],
-            **evaluate_weights(last, data),
-            "environment": env,
-            "finished": _now(),
-        }
-        write_json(results / result_name(variant, seed), result)
-        progress.left -= 1
-        depth = result["depth"]["frame"]
+    if jobs > 1:
+        _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh)
+    for variant, seed in todo if jobs == 1 else []:
         progress.line(
-            f"done {variant} seed {seed} in {(time.monotonic() - started) / 60:.1f} min: σ/μ {depth['scale_cv']:.4f}, "
-            f"abs rel {depth['abs_rel']:.3f} ({progress.left} runs left)"
+            f"start {variant} seed {seed} → {out / 'runs' / variant / f'seed{seed}'} ({progress.left} runs left)"
         )
+        started = time.monotonic()
+        progress.done(train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env), started)
         refresh()
     if not todo:  # else the last run's refresh wrote it
         refresh()
