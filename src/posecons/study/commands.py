@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=positive_int,
         default=1,
         help="runs side by side, each in its own process with the CPU threads shared out (default 1); "
-        "on a 2-core CPU, 2 get about 1.25× more done than 1",
+        "on a 2-core CPU, 2 get about 1.2× the steps of 1",
     )
     p.add_argument("--quiet", action="store_true", help="no per-step progress bar while a run trains")
     p.set_defaults(func=study_command)
