@@ -4,8 +4,10 @@ commands call, and the report, plots and summary come out (learning itself is as
 import json
 
 import pytest
+import torch
 
 from posecons.training.demo import run_demo
+from posecons.training.trainer import resolve_precision
 
 pytestmark = pytest.mark.slow
 
@@ -21,6 +23,9 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
     for key in ("abs_rel", "abs_rel_untrained", "scale_cv", "ate_mean", "minutes"):
         assert key in saved and saved[key] == summary[key] and saved[key] >= 0
     report = (out / "report.md").read_text()
+    # The preset's precision "auto", resolved for this CPU, is recorded and reported.
+    assert saved["precision"] == resolve_precision("auto", torch.device("cpu"))[0]
+    assert f"with precision {saved['precision']}" in report
     assert "| untrained |" in report and "| trained (cyc) |" in report and "constant velocity" in report
     # The demo evaluates the last step, chosen without ground truth, and the report says so.
     assert saved["checkpoint"]["selected_by"] == "none: the weights at that step"

@@ -234,6 +234,26 @@ def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, t
         Trainer(tiny_config("train.precision='16'"), synth_data, tmp_path / "fp16", quiet=True)
 
 
+def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
+    from posecons.training.trainer import resolve_precision
+
+    cpu = torch.device("cpu")
+    assert resolve_precision("32", cpu) == ("32", "") and resolve_precision("bf16", cpu) == ("bf16", "")
+    for avx512_bf16, amx, expected in ((True, False, "bf16"), (False, True, "bf16"), (False, False, "32")):
+        monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda v=avx512_bf16: v, raising=False)
+        monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda v=amx: v, raising=False)
+        precision, why = resolve_precision("auto", cpu)
+        assert (
+            precision == expected
+            and why == f"auto: this CPU {'has' if expected == 'bf16' else 'lacks'} AVX-512 BF16 / AMX"
+        )
+    monkeypatch.delattr(torch.cpu, "_is_avx512_bf16_supported")  # a torch without the probes: fp32, the safe side
+    monkeypatch.delattr(torch.cpu, "_is_amx_tile_supported")
+    assert resolve_precision("auto", cpu)[0] == "32"
+    with pytest.raises(PoseconsError, match="train.precision must be '32', 'bf16', '16' or 'auto', got 'fp8'"):
+        load_config(None, ["train.precision=fp8"])
+
+
 def test_deterministic_mode_on_cuda_warns_instead_of_raising(monkeypatch):
     from posecons.training.trainer import use_deterministic_algorithms
 

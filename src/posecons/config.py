@@ -136,7 +136,9 @@ class TrainConfig:
     grad_accum: int = 1
     seed: int = 0
     deterministic: bool = False
-    precision: str = "32"  # "32", "bf16" (GPU or CPU) or "16" (GPU): networks under autocast, their outputs fp32
+    # "32", "bf16" (GPU or CPU), "16" (GPU) or "auto" (bf16 where the device computes it natively, else 32):
+    # the networks under autocast, their outputs fp32.
+    precision: str = "32"
     sync_bn: bool = False  # SyncBatchNorm in the depth net across processes (the pose net's stays per group)
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50
@@ -202,8 +204,8 @@ class Config:
             )
         if lo.translation_norm not in ("sum", "mean"):
             raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
-        if self.train.precision not in ("32", "bf16", "16"):
-            raise PoseconsError(f"train.precision must be '32', 'bf16' or '16', got {self.train.precision!r}")
+        if self.train.precision not in ("32", "bf16", "16", "auto"):
+            raise PoseconsError(f"train.precision must be '32', 'bf16', '16' or 'auto', got {self.train.precision!r}")
         if self.train.best_metric not in ("val_photometric", "abs_rel"):
             raise PoseconsError(
                 f"train.best_metric must be 'val_photometric' or 'abs_rel', got {self.train.best_metric!r}"

@@ -40,8 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--precision",
-        choices=("32", "bf16", "16"),
-        help="mixed precision: bf16 (GPU or CPU) or 16 (GPU) (default: train.precision)",
+        choices=("32", "bf16", "16", "auto"),
+        help="mixed precision: bf16 (GPU or CPU), 16 (GPU), or auto: bf16 where the device has it natively "
+        "(default: train.precision)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=train_command)

@@ -60,7 +60,7 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     print("[3/5] training (synth/demo preset, cycle constraint) on the CPU", flush=True)
     shutil.rmtree(run, ignore_errors=True)
     train_start = time.time()
-    train(config, data, run, accelerator="cpu")
+    trained = train(config, data, run, accelerator="cpu")
     train_minutes = (time.time() - train_start) / 60
     # The last step: chosen without ground truth, as the paper's protocol does.
     ckpt = run / "checkpoints" / "last.pt"
@@ -93,6 +93,7 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
         "ate_full_rmse_const_velocity": pose["const_velocity"]["ate_full_rmse"],
         "checkpoint": weights,
         "train_minutes": train_minutes,
+        "precision": trained["precision"],
         "minutes": (time.time() - start) / 60,
         "config": config.to_dict(),
     }
@@ -113,7 +114,7 @@ def _report(s: dict, depth: dict, before: dict, pose: dict, seq: str, meta: dict
 
 Synthetic KITTI-format data (seed {meta.get("seed")}, {len(meta.get("drives", []))} drives), ResNet-{m["num_layers"]}
 at {m["width"]}×{m["height"]}, batch {t["batch_size"]}, lr {t["lr"]}, {t["max_steps"]} steps with the **cycle**
-constraint, trained on the CPU in {s["train_minutes"]:.1f} min (whole demo {s["minutes"]:.1f} min).
+constraint, trained on the CPU in {s["train_minutes"]:.1f} min with precision {s["precision"]} (whole demo {s["minutes"]:.1f} min).
 Evaluated: {checkpoint_note(s["checkpoint"])}.
 Test: the held-out drives' `test_files.txt`, LiDAR ground truth, Garg crop, per-frame median scaling.
 

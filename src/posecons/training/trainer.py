@@ -148,7 +148,8 @@ class Trainer:
         if self.env.main:
             _prepare_run_dir(self.out, resume)
         self.quiet = quiet or not self.env.main
-        if t.precision == "16" and self.device.type != "cuda":
+        self.precision, why = resolve_precision(t.precision, self.device)
+        if self.precision == "16" and self.device.type != "cuda":
             raise PoseconsError(
                 "train.precision=16 (float16 with a gradient scaler) needs a GPU; "
                 "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32"
@@ -198,7 +199,7 @@ class Trainer:
         )
         self.optimizer = torch.optim.Adam(model.parameters(), lr=t.lr)
         self.scheduler = torch.optim.lr_scheduler.MultiStepLR(self.optimizer, t.lr_decay_epochs, t.lr_decay)
-        self.scaler = torch.amp.GradScaler(self.device.type, enabled=t.precision == "16")
+        self.scaler = torch.amp.GradScaler(self.device.type, enabled=self.precision == "16")
         self.steps_per_epoch = len(self.train_set) // (t.batch_size * self.env.world * t.grad_accum)
         self.step = self.epoch = self.batch_in_epoch = self.bad_steps = self.skipped_steps = 0
         self.best = math.inf  # best validation value of train.best_metric so far
@@ -215,6 +216,8 @@ class Trainer:
             print(
                 f"initialisation: {self.initialisation}; best.pt selected by {describe_selection(t.best_metric)}"
                 + (f"; validation and checkpoints use the {self.weights} weights" if self.ema else "")
+                + f"; precision {self.precision}"
+                + (f" ({why})" if why else "")
             )
         self.writer = None
         if self.env.main:
@@ -350,7 +353,7 @@ class Trainer:
         )
 
     def _autocast(self):
-        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.config.train.precision)
+        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.precision)
         return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None)
 
     @property
@@ -391,6 +394,7 @@ class Trainer:
             "minutes_this_session": seconds / 60,
             "initialisation": self.initialisation,
             "weights": self.weights,
+            "precision": self.precision,
             "best_metric": self.config.train.best_metric,
             "last_validation": last_metrics,
         }
@@ -564,6 +568,23 @@ def collapse_signs(outputs: dict) -> dict[str, float]:
         "warped_fraction": float(outputs["automask"].float().mean()),
         "far_fraction": float((outputs["disp"][0].detach() < 0.01).float().mean()),
     }
+
+
+def resolve_precision(precision: str, device: torch.device) -> tuple[str, str]:
+    """``train.precision`` on ``device``: "auto" becomes "bf16" where the device computes bf16 natively
+    (a CUDA GPU that supports it; a CPU with AVX-512 BF16 or AMX, as torch reports) and "32" elsewhere,
+    where emulated bf16 would be slower than fp32. Returns (precision, why; why empty unless "auto")."""
+    if precision != "auto":
+        return precision, ""
+    if device.type == "cuda":
+        native = torch.cuda.is_bf16_supported()
+        where = f"{torch.cuda.get_device_name(device)} {'has' if native else 'lacks'} bf16"
+    else:
+        cpu = getattr(torch, "cpu", None)
+        checks = [getattr(cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
+        native = any(check() for check in checks if check is not None)
+        where = f"this CPU {'has' if native else 'lacks'} AVX-512 BF16 / AMX"
+    return ("bf16" if native else "32"), f"auto: {where}"
 
 
 def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
