@@ -4,7 +4,10 @@ mirror-odd outputs — sideways translation t_x, yaw and roll — flip sign for 
 must for a horizontally symmetric world. A pose net that outputs the same t_x for a pair and for its
 mirror image has learnt a constant bias, not motion (docs/results.md). For the depth net: the mean
 disparity of the left and right image halves, and how far the depth of the mirrored frame, mirrored
-back, is from the frame's own (0 for a mirror-symmetric network).
+back, is from the frame's own (0 for a mirror-symmetric network). For the cycle constraint: the
+rotation and translation parts of d(T_{i+2s←i}, T_{i+2s←i+s}·T_{i+s←i}) (geometry.pose_distance's two
+terms) and the skip pair's translation against a step's, beside the ground truth's ratio
+(docs/results.md §5).
 
     python tools/pose_bias.py --odometry DATA/odometry --sequence 05 RUN/checkpoints/last.pt [...]
 """
@@ -19,6 +22,7 @@ import torch
 
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.trajectory_io import read_kitti_poses
+from posecons.geometry import pose_vec_to_mat
 from posecons.inference.backend import load_predictor, predict_batches
 from posecons.inference.io import frames_from_paths
 
@@ -38,6 +42,7 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
         disp = predictor.model.depth_net(images)[0]
         disp_m = predictor.model.depth_net(images.flip(-1))[0].flip(-1)
     norm = np.linalg.norm(t, axis=1)
+    cycle = cycle_terms(predictor.model.pose_net, images, gt, stride)
     half = disp.shape[-1] // 2
     return {
         "corr_speed": float(np.corrcoef(norm, np.linalg.norm(true, axis=1))[0, 1]),
@@ -49,6 +54,26 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
         "disp_left": float(disp[..., :half].mean()),
         "disp_right": float(disp[..., half:].mean()),
         "disp_mirror_gap": float((disp - disp_m).abs().mean()),
+        **cycle,
+    }
+
+
+def cycle_terms(pose_net, images: torch.Tensor, gt: np.ndarray, n: int) -> dict[str, float]:
+    """The cycle distance's two terms over the sequence's triplets (i, i+n, i+2n), the skip pair's
+    mean translation over a step's, the true ratio, and the mean step translation."""
+    a, b, c = images[: -2 * n], images[n:-n], images[2 * n :]
+    with torch.no_grad():  # pose_net(x, y) is T_{y←x}
+        first, second, skip = (pose_vec_to_mat(*pose_net(x, y)) for x, y in ((a, b), (b, c), (a, c)))
+    composed = second @ first
+    true_step = np.linalg.norm((np.linalg.inv(gt[n:-n]) @ gt[: -2 * n])[:, :3, 3], axis=1)
+    true_skip = np.linalg.norm((np.linalg.inv(gt[2 * n :]) @ gt[: -2 * n])[:, :3, 3], axis=1)
+    step = first[:, :3, 3].norm(dim=-1).mean()
+    return {
+        "cycle_rotation_term": float(0.25 * (skip[:, :3, :3] - composed[:, :3, :3]).square().sum((-1, -2)).mean()),
+        "cycle_translation_term": float((skip[:, :3, 3] - composed[:, :3, 3]).abs().sum(-1).mean()),
+        "skip_over_step": float(skip[:, :3, 3].norm(dim=-1).mean() / step),
+        "true_skip_over_step": float(true_skip.mean() / true_step.mean()),
+        "step": float(step),
     }
 
 
@@ -61,7 +86,7 @@ def main() -> None:
     args = p.parse_args()
     for ckpt in args.checkpoints:
         stats = pose_bias(ckpt, args.odometry, args.sequence, args.stride)
-        print(f"{ckpt}: " + ", ".join(f"{k} {v:+.3f}" for k, v in stats.items()))
+        print(f"{ckpt}: " + ", ".join(f"{k} {v:+.3g}" for k, v in stats.items()))
 
 
 if __name__ == "__main__":
