@@ -12,6 +12,7 @@ from posecons.geometry import (
     make_pose,
     pixels_to_grid,
     pose_distance,
+    pose_distance_terms,
     pose_vec_to_mat,
     project,
     project_depth,
@@ -78,6 +79,9 @@ def test_pose_distance_formula(dtype):
     expected = abs(1 - ((1 + 2 * math.cos(angle)) - 1) / 2) + 0.5 + 0.0 + 1.0
     assert pose_distance(T, P).item() == pytest.approx(expected, abs=5 * TOL[dtype])
     assert pose_distance(T, P, "mean").item() == pytest.approx(expected - 1.5 + 0.5, abs=5 * TOL[dtype])
+    rotation, translation = pose_distance_terms(T, P)  # the two terms apart: 1 − cos θ and the L1 of Δt
+    assert rotation.item() == pytest.approx(1 - math.cos(angle), abs=5 * TOL[dtype])
+    assert translation.item() == pytest.approx(1.5, abs=5 * TOL[dtype])
 
 
 def _rotation_pairs(n: int, dtheta: float, dtype: torch.dtype):

@@ -22,7 +22,7 @@ import torch
 
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.trajectory_io import read_kitti_poses
-from posecons.geometry import pose_vec_to_mat
+from posecons.geometry import pose_distance_terms, pose_vec_to_mat
 from posecons.inference.backend import load_predictor, predict_batches
 from posecons.inference.io import frames_from_paths
 
@@ -64,13 +64,13 @@ def cycle_terms(pose_net, images: torch.Tensor, gt: np.ndarray, n: int) -> dict[
     a, b, c = images[: -2 * n], images[n:-n], images[2 * n :]
     with torch.no_grad():  # pose_net(x, y) is T_{y←x}
         first, second, skip = (pose_vec_to_mat(*pose_net(x, y)) for x, y in ((a, b), (b, c), (a, c)))
-    composed = second @ first
+    rotation, translation = pose_distance_terms(skip, second @ first)
     true_step = np.linalg.norm((np.linalg.inv(gt[n:-n]) @ gt[: -2 * n])[:, :3, 3], axis=1)
     true_skip = np.linalg.norm((np.linalg.inv(gt[2 * n :]) @ gt[: -2 * n])[:, :3, 3], axis=1)
     step = first[:, :3, 3].norm(dim=-1).mean()
     return {
-        "cycle_rotation_term": float(0.25 * (skip[:, :3, :3] - composed[:, :3, :3]).square().sum((-1, -2)).mean()),
-        "cycle_translation_term": float((skip[:, :3, 3] - composed[:, :3, 3]).abs().sum(-1).mean()),
+        "cycle_rotation_term": float(rotation.mean()),
+        "cycle_translation_term": float(translation.mean()),
         "skip_over_step": float(skip[:, :3, 3].norm(dim=-1).mean() / step),
         "true_skip_over_step": float(true_skip.mean() / true_step.mean()),
         "step": float(step),

@@ -84,7 +84,16 @@ def pose_vec_to_mat(axisangle: torch.Tensor, translation: torch.Tensor, invert: 
 
 
 def pose_distance(T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum") -> torch.Tensor:
-    """The paper's eq. 2: d(T, P) = |1 − (tr(R_T R_Pᵀ) − 1)/2| + ‖t_T − t_P‖₁, shape (B,).
+    """The paper's eq. 2, d(T, P), shape (B,): the sum of :func:`pose_distance_terms`."""
+    rot_term, trans_term = pose_distance_terms(T, P, translation_norm)
+    return rot_term + trans_term
+
+
+def pose_distance_terms(
+    T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum"
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The two terms of the paper's eq. 2, d(T, P) = |1 − (tr(R_T R_Pᵀ) − 1)/2| + ‖t_T − t_P‖₁: the
+    rotation term and the translation term, each (B,).
 
     The rotation term is 1 − cos(angle between R_T and R_P), smooth at zero (no acos). It is
     computed as ¼‖R_T − R_P‖²_F, which equals (3 − tr(R_T R_Pᵀ))/2 exactly for rotations and is
@@ -97,7 +106,7 @@ def pose_distance(T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum
     rot_term = 0.25 * (T[:, :3, :3] - P[:, :3, :3]).square().sum((-1, -2))
     dt = (T[:, :3, 3] - P[:, :3, 3]).abs()
     trans_term = dt.mean(-1) if translation_norm == "mean" else dt.sum(-1)
-    return rot_term + trans_term
+    return rot_term, trans_term
 
 
 # ----------------------------------------------------------------------------- camera

@@ -162,9 +162,9 @@ def scale_vs_scene_depth(scales: Sequence[float], scene_depths: Sequence[float],
     slope of log scale on log scene depth (the frame's median ground-truth depth) and their
     correlation, σ/μ of the scale with that dependence divided out, and the frame-to-frame jitter
     rms(log s_{i+1} − log s_i)/√2 (σ for independent noise of σ in log s); each the mean over
-    sequences, as ``scale_cv``. Slope 0: the scale
-    ignores the scene. A depth net whose prediction grows like gt^(1−b) (compressed depth) has slope b:
-    its scale varies with how far the scene is, however consistent it is over time."""
+    sequences, as ``scale_cv``. Slope 0: the scale ignores the scene. A depth net whose prediction
+    grows like gt^(1−b) (compressed depth) has slope b: its scale varies with how far the scene is,
+    however consistent it is over time."""
     scales, depths = np.log(np.asarray(scales, dtype=np.float64)), np.log(np.asarray(scene_depths, dtype=np.float64))
     if not len(scales) == len(depths) == len(sequences):
         raise PoseconsError(f"{len(scales)} scales, {len(depths)} scene depths, {len(sequences)} sequence names")
