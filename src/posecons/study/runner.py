@@ -24,15 +24,17 @@ import platform
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import torch
 import yaml
 
-from ..checkpoint import describe_checkpoint
+from ..checkpoint import describe_checkpoint, load_checkpoint
 from ..config import Config, config_from_dict
 from ..data.gt import export_gt, load_gt
 from ..data.splits import SplitLine, read_split
@@ -184,6 +186,21 @@ def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
     return {"depth": depth, "pose": pose, "test_lines": [str(line) for line in data.split]}
 
 
+def raw_weights_result(checkpoint: Path, data: StudyData) -> dict[str, Any]:
+    """With ``train.ema_decay``, the raw weights of the same step evaluated as the EMA is: the EMA's
+    effect paired on one trajectory (docs/results.md §7). Empty for a checkpoint without an EMA."""
+    state = load_checkpoint(checkpoint)
+    if "raw_model" not in state:
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        raw = Path(tmp) / "raw.pt"
+        torch.save({"config": state["config"], "model": state["raw_model"], "step": state["step"]}, raw)
+        result = evaluate_weights(raw, data)
+    for part in (*result["depth"].values(), *result["pose"].values()):  # not the temporary file
+        part["predictions"] = f"{checkpoint}: raw_model"
+    return {"raw_weights": {"depth": result["depth"], "pose": result["pose"]}}
+
+
 def depth_floor(spec: StudySpec, data: StudyData) -> dict[str, Any]:
     """The renderer's exact depth at the network size, evaluated like a run: what resizing, sparse
     LiDAR and the crop leave of each metric (and of σ/μ) for a perfect depth network."""
@@ -229,6 +246,7 @@ def train_and_evaluate(
         "train_minutes": summary["minutes"],
         "steps": summary["steps"],
         **evaluate_weights(last, data),
+        **raw_weights_result(last, data),
         "environment": env,
         "finished": _now(),
     }
