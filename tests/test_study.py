@@ -45,7 +45,9 @@ def table_rows(text: str) -> list[str]:
 
 @pytest.mark.slow
 def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_json(tmp_path, monkeypatch, capsys):
-    spec, out = write_spec(tmp_path / "toy.yaml"), tmp_path / "study"
+    # The cyc run keeps an EMA of its weights: its result pairs them with its raw weights.
+    variants = {"baseline": ["loss.constraints=[]"], "cyc": ["loss.constraints=[cyc]", "train.ema_decay=0.5"]}
+    spec, out = write_spec(tmp_path / "toy.yaml", variants=variants), tmp_path / "study"
     argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu"]
     calls = []
     real_train = runner.train
@@ -74,11 +76,16 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert calls == [("baseline", False), ("cyc", False), ("cyc", True)]
     cyc = json.loads((results / "cyc_seed0.json").read_text())
     assert cyc["steps"] == 3 and cyc["checkpoint"]["step"] == 3 and cyc["checkpoint"]["file"].endswith("last.pt")
-    assert cyc["overrides"][-2:] == ["loss.constraints=[cyc]", "train.seed=0"] and cyc["config"]["train"]["seed"] == 0
+    assert cyc["overrides"][-3:] == [*variants["cyc"], "train.seed=0"] and cyc["config"]["train"]["seed"] == 0
     for scaling in ("frame", "sequence"):
         depth = cyc["depth"][scaling]
         assert depth["scaling"] == scaling and len(depth["scales"]) == len(cyc["test_lines"]) == SYNTH["frames"]
     assert set(cyc["pose"]) == {"02"} and "const_velocity" in cyc["pose"]["02"]
+    raw = cyc["raw_weights"]  # evaluated the same way, but not the EMA again
+    assert raw["depth"]["frame"]["abs_rel"] != cyc["depth"]["frame"]["abs_rel"] and set(raw["pose"]) == {"02"}
+    assert raw["pose"]["02"]["ate_full_rmse"] != cyc["pose"]["02"]["ate_full_rmse"]
+    assert raw["depth"]["sequence"]["predictions"].endswith("last.pt: raw_model")
+    assert "raw_weights" not in json.loads((results / "baseline_seed0.json").read_text())
     untrained = json.loads((results / "untrained_seed0.json").read_text())
     assert untrained["checkpoint"]["step"] == 0 and untrained["depth"]["frame"]["abs_rel"] > 0
     floor = json.loads((results / "renderer_depth_seed0.json").read_text())["depth"]["frame"]
@@ -116,7 +123,7 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert table_rows(again.read_text()) == table_rows(docs.read_text()) == table_rows(report)
     assert (tmp_path / "elsewhere/r/scale_boxplot.png").is_file()
 
-    write_spec(spec, overrides=[*TINY[:-3], "train.max_steps=4", *TINY[-2:]])
+    write_spec(spec, overrides=[*TINY[:-3], "train.max_steps=4", *TINY[-2:]], variants=variants)
     assert main(argv) == 2  # a changed recipe does not mix with the runs already done
     assert "train.max_steps: 3 → 4" in capsys.readouterr().err
     assert len(calls) == 3
@@ -162,6 +169,11 @@ def test_spec_checks_and_bundled_specs(tmp_path):
     assert norm.data == synth.data and norm.preset_file == synth.preset_file
     assert all(norm.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in ("baseline", "cyc"))
     assert norm.config("cyc_temporal", 0).model.constraint_norm == "temporal"
+    # synth_ema likewise shares the baseline runs; its EMA run trains as they do.
+    ema = load_spec(copy.with_name("synth_ema.yaml"))
+    assert ema.data == synth.data and ema.run_overrides("baseline", 0) == synth.run_overrides("baseline", 0)
+    assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
+    assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss
     subset = spec.select(["cyc", "baseline"], [3, 4, 5])  # the spec's order: the reference stays first
     assert list(subset.variants) == ["baseline", "cyc"] and subset.runs()[:2] == [("baseline", 3), ("cyc", 3)]
     # Without the reference named, it is kept: the untrained row and the differences are its.
@@ -188,7 +200,9 @@ def test_spec_checks_and_bundled_specs(tmp_path):
 
 @pytest.mark.slow
 def test_jobs_run_side_by_side_in_worker_processes_and_pass_a_signal_on(tmp_path, capsys):
-    spec, out = write_spec(tmp_path / "toy.yaml"), tmp_path / "study"
+    # The cyc run keeps an EMA of its weights: its result pairs them with its raw weights.
+    variants = {"baseline": ["loss.constraints=[]"], "cyc": ["loss.constraints=[cyc]", "train.ema_decay=0.5"]}
+    spec, out = write_spec(tmp_path / "toy.yaml", variants=variants), tmp_path / "study"
     argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu", "--jobs", "2"]
     assert main(argv) == 0
     threads = max(1, torch.get_num_threads() // 2)
