@@ -129,6 +129,21 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert len(calls) == 3
 
 
+def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
+    """The committed results folder holds five seeds of baseline and cyc and other specs' variants;
+    a report of two seeds and one variant averages and pairs those alone."""
+    report = tmp_path / "r.md"
+    argv = ["study", "--report-only", "--spec", "study/synth_norm", "--variants", "cyc", "--seeds", "0", "1"]
+    assert (
+        main([*argv, "--results", str(Path(__file__).parents[1] / "docs/results/study/json"), "--report", str(report)])
+        == 0
+    )
+    text = report.read_text()
+    assert "| untrained | 2 |" in text and "| baseline | 2 |" in text and "| cyc | 2 |" in text
+    assert "| mean σ/μ | cyc | 2 |" in text and "| renderer_depth | 1 |" in text
+    assert "cyc_temporal" not in text and "| id |" not in text
+
+
 def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp_path):
     """Seed k gives every variant the same initial weights (= the study's untrained network) and the
     same first batch; another seed changes both, so the comparison can fail."""

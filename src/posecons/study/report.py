@@ -349,7 +349,15 @@ def write_report(results_dir: Path, report: Path, study: dict | None = None, pub
     results_dir, report = Path(results_dir), Path(report)
     study = study or load_study(results_dir)
     figures = report.with_suffix("")
-    text = report_text(study, load_results(results_dir), figures)
+    # Only the study's runs: a results folder shared by several specs, or a --seeds/--variants
+    # selection, holds others, which would otherwise enter the means and the pairs.
+    names = {UNTRAINED, FLOOR, *study["variants"]}
+    results = [
+        r
+        for r in load_results(results_dir)
+        if r["variant"] in names and (r["variant"] == FLOOR or r["seed"] in study["seeds"])
+    ]
+    text = report_text(study, results, figures)
     copies = figures / "json"
     if publish and copies.resolve() != results_dir.resolve():
         with output_dir(copies) as tmp:
