@@ -60,7 +60,7 @@ def test_cached_batches_are_bit_identical_with_flips_and_jitter(data, cache, mon
     def no_decoding(*args, **kwargs):
         raise AssertionError("the cached loader decoded an image")
 
-    monkeypatch.setattr(frames_module, "load_rgb", no_decoding)
+    monkeypatch.setattr(frames_module, "load_resized", no_decoding)
     cached_config = config(f"data.cache_dir={cache}")
     for (train, epoch), expected in plain.items():
         got = batches(cached_config, data, train, epoch)
@@ -101,6 +101,7 @@ def test_cache_holds_the_resized_uint8_frames_and_a_manifest(data, cache):
         (["model.width=96"], ["model.width 128 (now 96)"]),
         (["model.frame_ids=[0,-2,2]", "data.skip_incomplete=true"], ["model.frame_ids [0, -1, 1] (now [0, -2, 2])"]),
         (["data.img_ext=.jpg"], ["data.img_ext '.png' (now '.jpg')"]),
+        (["data.jpeg_draft=true"], ["resize ", "to uint8' (now ", "JPEGs decoded at the smallest DCT scale"]),
     ],
 )
 def test_cache_for_another_setting_is_refused(data, cache, extra, fragments):

@@ -7,10 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 from posecons.data.calib import raw_intrinsics, read_calib_file, velo_to_image
 from posecons.data.gt import improved_gt_path, lidar_gt, read_improved_gt, velo_to_depth_map
-from posecons.data.io import load_velodyne
+from posecons.data.io import load_resized, load_rgb, load_velodyne, resize_uint8
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts
@@ -128,6 +129,33 @@ def test_real_raw_dataset(kitti_dir: Path) -> None:
     assert left["intrinsics"][0, 0].item() == pytest.approx(721.5377 / 1242, rel=1e-6)
     assert not np.allclose(left["frames"].numpy(), right["frames"].numpy())
     assert (left["folder"], left["frame"], left["side"]) == (DRIVE, 5, "l")
+
+
+def test_jpeg_draft_decodes_at_a_reduced_scale_only_where_it_serves(kitti_dir: Path, tmp_path: Path) -> None:
+    """Real frames, also converted to JPEG as KITTI users do: the training loader's pixels are the
+    evaluation's (full decode, then resize_uint8) bit for bit; data.jpeg_draft changes them only for
+    a JPEG at under half its size, where the decode is a quarter of the frame."""
+    raw, root = kitti_dir / "raw_samples", tmp_path / "raw"
+    (root / DRIVE / "image_02/data").mkdir(parents=True)
+    for name in ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt", "calib_imu_to_velo.txt"):
+        (root / DRIVE).parent.joinpath(name).write_bytes((raw / DRIVE).parent.joinpath(name).read_bytes())
+    for frame in (4, 5, 6):
+        png = raw / DRIVE / f"image_02/data/{frame:010d}.png"
+        Image.open(png).convert("RGB").save(root / DRIVE / f"image_02/data/{frame:010d}.jpg", quality=95)
+    png, jpg = raw / DRIVE / "image_02/data/0000000005.png", root / DRIVE / "image_02/data/0000000005.jpg"
+    for path in (png, jpg):
+        for h, w in ((64, 192), (192, 640)):
+            assert np.array_equal(load_resized(path, h, w), resize_uint8(np.asarray(load_rgb(path)), h, w))
+            if path == png or w == 640:  # a PNG, or a size above half of 1242×375: the same decode
+                assert np.array_equal(load_resized(path, h, w, jpeg_draft=True), load_resized(path, h, w))
+    assert load_rgb(jpg, draft=(192, 64)).size == (311, 94)  # 1242×375 / 4: the smallest scale ≥ 192×64
+    datasets = [
+        KittiRawDataset(root, [f"{DRIVE} 5 l"], 64, 192, img_ext=".jpg", train=False, jpeg_draft=d) for d in (0, 1)
+    ]
+    full, draft = (ds[0]["frames"].numpy() * 255 for ds in datasets)
+    assert full.shape == draft.shape == (3, 3, 64, 192)
+    assert np.array_equal(full[0], load_resized(jpg, 64, 192).transpose(2, 0, 1).astype(np.float32))
+    assert 0.5 < np.abs(full - draft).mean() < 5  # other pixels, but the same image
 
 
 def test_odometry_frames_are_found_as_png_or_converted_jpg_but_never_mixed(tmp_path):

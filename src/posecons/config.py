@@ -123,6 +123,11 @@ class DataConfig:
     # Drop split lines whose frames (model.frame_ids) are not all on disk, printing how many, instead
     # of stopping at the first: e.g. frame offsets ±3 on a split made for ±1 near drive ends.
     skip_incomplete: bool = False
+    # Decode JPEG frames by DCT scaling at the smallest 1/2, 1/4 or 1/8 of their size that still covers
+    # model.width × height, then resize: about 4× faster at 192×64 from KITTI's 1242×375, but other
+    # pixels (a mean 1.5–3 grey levels) than the full decode that evaluation and inference use; no
+    # effect above half the frame size (the paper's 640×192) or on PNGs (docs/performance.md).
+    jpeg_draft: bool = False
 
 
 @dataclass

@@ -4,14 +4,14 @@
 Layout::
 
     CACHE/manifest.json                              what the cache was made for, and whether it is complete
-    CACHE/frames/<image path under DATA>.npy         (height, width, 3) uint8: resize_uint8 of the image
+    CACHE/frames/<image path under DATA>.npy         (height, width, 3) uint8: load_resized of the image
 
-A cached array is what :func:`~posecons.data.io.resize_uint8` returns for the decoded image; the
+A cached array is what :func:`~posecons.data.io.load_resized` returns for the image file; the
 loader turns it into a sample exactly as it turns a freshly decoded one (``to_float``, then the
 flip), so batches are bit-identical with and without the cache. Every file is written atomically,
 so an interrupted build leaves whole frames and a manifest saying ``"complete": false``: the same
 command finishes it. Training (``data.cache_dir``) refuses a cache made for another data path,
-dataset, image extension, size, resize, frame offsets or split file, naming what differs.
+dataset, image extension, size, resize (and data.jpeg_draft), frame offsets or split file, naming what differs.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 
 from ..config import Config
 from ..errors import PoseconsError
-from .io import RESIZE, image_suffix
+from .io import JPEG_DRAFT, RESIZE, image_suffix
 
 FORMAT = "posecons frame cache v1"
 MANIFEST = "manifest.json"
@@ -52,7 +52,7 @@ def cache_key(config: Config, data_path: str | Path, splits: dict[str, Path | No
         "img_ext": image_suffix(d.img_ext),
         "height": m.height,
         "width": m.width,
-        "resize": RESIZE,
+        "resize": RESIZE + (JPEG_DRAFT if d.jpeg_draft else ""),
         "frame_ids": list(m.frame_ids),
         "splits": {
             role: None if path is None else {"file": str(path), "sha256": _sha256(path)}
@@ -112,7 +112,7 @@ class FrameCache:
         return self.folder / "frames" / Path(image).relative_to(self.data_path).with_suffix(".npy")
 
     def load(self, image: Path) -> np.ndarray:
-        """(height, width, 3) uint8 of ``image``, as :func:`~posecons.data.io.resize_uint8` made it."""
+        """(height, width, 3) uint8 of ``image``, as :func:`~posecons.data.io.load_resized` made it."""
         path = self.file(image)
         try:
             return np.load(path, allow_pickle=False)

@@ -14,13 +14,13 @@ from ..errors import PoseconsError
 from ..fileio import atomic_write, make_dirs, remove_temporaries, write_json
 from .cache import MANIFEST, FrameCache, cache_key, differences, read_manifest
 from .datasets import build_dataset, split_files
-from .io import load_rgb, resize_uint8
+from .io import load_resized
 from .parallel import fork_map
 
 
-def _cache_frame(job: tuple[Path, tuple[Path, tuple[int, int]], Path, int, int]) -> None:
-    source, like, target, height, width = job
-    pixels = resize_uint8(np.asarray(load_rgb(source, like=like)), height, width)
+def _cache_frame(job: tuple[Path, tuple[Path, tuple[int, int]], Path, int, int, bool]) -> None:
+    source, like, target, height, width, jpeg_draft = job
+    pixels = load_resized(source, height, width, like, jpeg_draft)
     atomic_write(target, lambda tmp: np.save(tmp, pixels, allow_pickle=False))
 
 
@@ -64,7 +64,8 @@ def build_cache(
         make_dirs(folder)
         remove_temporaries(folder)  # what a killed build was writing
     todo = [
-        (image, images[image], target, config.model.height, config.model.width) for image, target in targets.items()
+        (image, images[image], target, config.model.height, config.model.width, config.data.jpeg_draft)
+        for image, target in targets.items()
     ]
     todo = [job for job in todo if not job[2].is_file()]
     fork_map(_cache_frame, todo, workers)

@@ -54,4 +54,5 @@ def build_dataset(config: Config, data_path: str | Path, split_file: Path, train
         seed=config.train.seed,
         skip_incomplete=d.skip_incomplete,
         cache=cache,
+        jpeg_draft=d.jpeg_draft,
     )

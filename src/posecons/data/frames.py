@@ -26,7 +26,7 @@ from ..geometry import flip_intrinsics
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
 from .cache import FrameCache
 from .calib import KITTI_FIXED_K
-from .io import image_suffix, load_rgb, resize_uint8, to_float
+from .io import image_suffix, load_resized, to_float
 from .splits import SplitLine, SplitSource, read_split
 
 
@@ -38,7 +38,7 @@ class FrameDataset(Dataset):
     (fx=0.58, fy=1.92, cx=cy=0.5); augmentation draws depend only on (seed, epoch, index);
     ``check_files`` stats every needed image (and cached frame) up front so a bad split fails
     before training; ``cache``: a :class:`~posecons.data.cache.FrameCache` to read the resized
-    frames from.
+    frames from; ``jpeg_draft``: decode JPEGs at a reduced DCT scale (:func:`~posecons.data.io.load_resized`).
     """
 
     def __init__(
@@ -57,6 +57,7 @@ class FrameDataset(Dataset):
         check_files: bool = True,
         skip_incomplete: bool = False,
         cache: FrameCache | None = None,
+        jpeg_draft: bool = False,
     ) -> None:
         self.data_path = Path(data_path)
         self.lines: list[SplitLine] = read_split(split)
@@ -70,6 +71,7 @@ class FrameDataset(Dataset):
         self.epoch = 0
         self.skip_incomplete = skip_incomplete
         self.cache = cache
+        self.jpeg_draft = jpeg_draft
         if check_files:
             self.check_files()
         self._first = {(line.folder, line.side): line for line in reversed(self.lines)}  # first line per camera
@@ -145,13 +147,13 @@ class FrameDataset(Dataset):
         return len(self.lines)
 
     def load_frame(self, path: Path, flip: bool, like: tuple[Path, tuple[int, int]] | None = None) -> torch.Tensor:
-        """Decode and resize exactly as evaluation and inference do (``resize_rgb``), or read what
-        the cache holds of that, then flip: (3, H, W) float32 in [0, 1]; ``like``: see
-        :func:`~posecons.data.io.load_rgb`."""
+        """Decode and resize exactly as evaluation and inference do (``resize_rgb``; with
+        ``jpeg_draft`` a reduced JPEG decode first), or read what the cache holds of that, then flip:
+        (3, H, W) float32 in [0, 1]; ``like``: see :func:`~posecons.data.io.load_rgb`."""
         if self.cache is not None:
             pixels = self.cache.load(path)
         else:
-            pixels = resize_uint8(np.asarray(load_rgb(path, like=like)), self.height, self.width)
+            pixels = load_resized(path, self.height, self.width, like, self.jpeg_draft)
         image = torch.from_numpy(to_float(pixels))
         return image.flip(-1) if flip else image
 
