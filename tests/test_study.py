@@ -184,9 +184,12 @@ def test_spec_checks_and_bundled_specs(tmp_path):
     assert norm.data == synth.data and norm.preset_file == synth.preset_file
     assert all(norm.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in ("baseline", "cyc"))
     assert norm.config("cyc_temporal", 0).model.constraint_norm == "temporal"
-    # synth_ema likewise shares the baseline runs; its EMA run trains as they do.
+    # synth_ema and synth_dc likewise share study/synth's runs of the variants they name.
+    for name, shared in (("synth_ema", ["baseline"]), ("synth_dc", ["baseline", "dc"])):
+        other = load_spec(copy.with_name(f"{name}.yaml"))
+        assert other.data == synth.data and other.preset_file == synth.preset_file
+        assert all(other.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in shared)
     ema = load_spec(copy.with_name("synth_ema.yaml"))
-    assert ema.data == synth.data and ema.run_overrides("baseline", 0) == synth.run_overrides("baseline", 0)
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss
     subset = spec.select(["cyc", "baseline"], [3, 4, 5])  # the spec's order: the reference stays first
