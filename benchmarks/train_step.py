@@ -22,7 +22,8 @@ from posecons.model import PoseConsModel
 VARIANTS = {"baseline": [], "fb": ["fb"], "id": ["id"], "cyc": ["cyc"], "all": ["fb", "id", "cyc"]}
 
 
-def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
+def make_model(constraints: list[str], args: argparse.Namespace, device: torch.device) -> PoseConsModel:
+    """The model of the benchmark, with these constraints, from fixed random weights."""
     cfg = load_config(
         overrides=[
             f"model.height={args.height}",
@@ -33,16 +34,24 @@ def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
         ]
     )
     torch.manual_seed(0)
-    device = torch.device(args.device)
-    model = PoseConsModel(cfg).to(device).train()
-    optim = torch.optim.Adam(model.parameters(), lr=1e-4)
-    batch = {
+    return PoseConsModel(cfg).to(device).train()
+
+
+def make_batch(args: argparse.Namespace, device: torch.device) -> dict:
+    """Random frames with KITTI's normalised K and one colour jitter."""
+    return {
         "frames": torch.rand(args.batch, 3, 3, args.height, args.width, device=device),
         "intrinsics": torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], device=device)
         .expand(args.batch, 3, 3)
         .contiguous(),
         "color_aug": torch.tensor([1.1, 0.9, 1.05, 0.02], device=device).expand(args.batch, 4).contiguous(),
     }
+
+
+def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
+    device = torch.device(args.device)
+    model, batch = make_model(constraints, args, device), make_batch(args, device)
+    optim = torch.optim.Adam(model.parameters(), lr=1e-4)
     times = []
     for i in range(args.warmup + args.steps):
         if device.type == "cuda":
