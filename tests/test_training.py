@@ -115,6 +115,11 @@ def test_resume_with_ema_gives_the_uninterrupted_weights(synth_data, tmp_path):
         for key, value in full[weights].items():
             assert torch.equal(value, resumed[weights][key]), (weights, key)
     assert any(not torch.equal(v, full["raw_model"][k]) for k, v in full["model"].items())
+    # Keeping an EMA leaves the trajectory alone: its raw weights are those of the run without one
+    # (what lets a study pair the EMA with the raw weights of the same run).
+    train(tiny_config(*sets[1:], "train.max_steps=4"), synth_data, tmp_path / "plain", quiet=True)
+    plain = load_checkpoint(tmp_path / "plain" / "checkpoints" / "last.pt")["model"]
+    assert all(torch.equal(value, full["raw_model"][key]) for key, value in plain.items())
 
 
 def test_warmup_ramps_the_scheduled_rate_across_an_lr_decay_and_resumes_on_the_ramp(synth_data, tmp_path):
