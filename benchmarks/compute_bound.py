@@ -16,7 +16,7 @@ from functools import partial
 
 import torch
 from torch.utils.flop_counter import FlopCounterMode
-from train_step import make_batch, make_model
+from train_step import make_batch, make_model, setting_arguments
 
 from posecons.data.augment import jitter_batch
 from posecons.networks import ResnetEncoder
@@ -58,11 +58,7 @@ def product(a: torch.Tensor, b: torch.Tensor) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--height", type=int, default=192)
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--batch", type=int, default=12)
-    p.add_argument("--layers", type=int, default=18)
-    p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    setting_arguments(p)
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args()
     device = torch.device(args.device)

@@ -69,13 +69,18 @@ def time_steps(constraints: list[str], args: argparse.Namespace) -> float:
     return statistics.median(times)
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def setting_arguments(p: argparse.ArgumentParser) -> None:
+    """The size, batch, encoder depth and device of a benchmark (the paper's setting by default)."""
     p.add_argument("--height", type=int, default=192)
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--batch", type=int, default=12)
     p.add_argument("--layers", type=int, default=18)
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    setting_arguments(p)
     p.add_argument("--steps", type=int, default=10)
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--bf16", action="store_true", help="autocast the networks to bfloat16")

@@ -60,9 +60,14 @@ RESIZE = "PIL bilinear (antialiased when shrinking) to uint8"  # what resize_uin
 JPEG_DRAFT = "; JPEGs decoded at the smallest DCT scale that serves"  # RESIZE's addition with data.jpeg_draft
 
 
+def _resize(image: Image.Image, height: int, width: int) -> np.ndarray:
+    """The one resize of every frame (:data:`RESIZE`): PIL image → (height, width, 3) uint8."""
+    return np.asarray(image.resize((width, height), Image.BILINEAR))
+
+
 def resize_uint8(image: np.ndarray, height: int, width: int) -> np.ndarray:
     """(H, W, 3) uint8 → (height, width, 3) uint8, resized like the training data (:data:`RESIZE`)."""
-    return np.asarray(Image.fromarray(image).resize((width, height), Image.BILINEAR))
+    return _resize(Image.fromarray(image), height, width)
 
 
 def load_resized(
@@ -71,8 +76,7 @@ def load_resized(
     """An image file → (height, width, 3) uint8 as the training data is made: the decoded image
     resized like :func:`resize_uint8` (the same pixels, without a full-size array in between), after
     a DCT-scaled JPEG decode with ``jpeg_draft`` (:func:`load_rgb`'s ``draft``)."""
-    image = load_rgb(path, like, (width, height) if jpeg_draft else None)
-    return np.asarray(image.resize((width, height), Image.BILINEAR))
+    return _resize(load_rgb(path, like, (width, height) if jpeg_draft else None), height, width)
 
 
 def to_float(image: np.ndarray) -> np.ndarray:
