@@ -189,6 +189,13 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         other = load_spec(copy.with_name(f"{name}.yaml"))
         assert other.data == synth.data and other.preset_file == synth.preset_file
         assert all(other.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in shared)
+    # synth_bf16 is study/synth in bf16 with an EMA, nothing else: same data, variants and losses.
+    fast = load_spec(copy.with_name("synth_bf16.yaml"))
+    assert fast.data == synth.data and list(fast.variants) == list(synth.variants) and fast.seeds == synth.seeds
+    for v in synth.variants:
+        a, b = fast.config(v, 1), synth.config(v, 1)
+        assert (a.train.precision, a.train.ema_decay) == ("bf16", 0.99) and b.train.precision == "32"
+        assert a.loss == b.loss and a.model == b.model and a.data == b.data
     ema = load_spec(copy.with_name("synth_ema.yaml"))
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss
