@@ -50,8 +50,8 @@ def dataset(cfg, data: Path, train: bool = True):
 
 def batches(cfg, data: Path, train: bool, epoch: int) -> list[dict]:
     ds = dataset(cfg, data, train)
-    ds.set_epoch(epoch)
-    return list(DataLoader(ds, batch_size=2, shuffle=True, generator=torch.Generator().manual_seed(epoch)))
+    order = torch.randperm(len(ds), generator=torch.Generator().manual_seed(epoch)).tolist()
+    return list(DataLoader(ds, batch_size=2, sampler=[(epoch, i) for i in order]))
 
 
 def test_cached_batches_are_bit_identical_with_flips_and_jitter(data, cache, monkeypatch):

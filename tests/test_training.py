@@ -142,6 +142,29 @@ def test_warmup_ramps_the_scheduled_rate_across_an_lr_decay_and_resumes_on_the_r
     assert rates(tmp_path / "part", 2) + rates(tmp_path / "part", steps, resume=True) == pytest.approx(want, rel=1e-12)
 
 
+def test_persistent_loader_workers_draw_each_epochs_augmentation(synth_data, tmp_path):
+    """One loader serves every epoch and keeps its worker; a batch is the dataset's samples of that
+    epoch in the shuffled order (a worker left at epoch 0 would repeat epoch 0's flips and jitter)."""
+    cfg = tiny_config("data.num_workers=1", "data.flip_prob=0.5", "data.jitter_prob=1.0")
+    trainer = Trainer(cfg, synth_data, tmp_path / "run", quiet=True)
+    seen = {}
+    for epoch in (0, 1, 2):
+        loader = trainer._loader(epoch, 0)
+        seen[epoch] = list(loader)
+        worker = loader._iterator._workers[0]
+        assert loader.persistent_workers and seen.setdefault("worker", worker) is worker
+    for epoch in (0, 1, 2):
+        for batch in seen[epoch]:
+            for i, index in enumerate(batch["index"].tolist()):
+                want = trainer.train_set[(epoch, index)]
+                assert torch.equal(batch["color_aug"][i], want["color_aug"])
+                assert torch.equal(batch["frames"][i], want["frames"])
+    augs = [{i: a for b in seen[e] for i, a in zip(b["index"].tolist(), b["color_aug"])} for e in (0, 1)]
+    both = augs[0].keys() & augs[1].keys()
+    assert len(both) >= 4 and not any(torch.equal(augs[0][i], augs[1][i]) for i in both)
+    assert [b["index"].tolist() for b in trainer._loader(1, 2)] == [b["index"].tolist() for b in seen[1][2:]]
+
+
 def test_collapse_signs_count_warped_pixels_and_far_pinned_disparities():
     disp = torch.full((2, 1, 4, 4), 0.5)
     disp[0, 0, 0] = 0.005  # 4 of 32 pixels pinned at the far end (small sigmoid = small disparity = far)

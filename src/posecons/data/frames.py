@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from PIL import Image
-from torch.utils.data import Dataset
+from torch.utils.data import Dataset, DistributedSampler, Sampler
 
 from ..errors import PoseconsError
 from ..geometry import flip_intrinsics
@@ -28,6 +28,26 @@ from .cache import FrameCache
 from .calib import KITTI_FIXED_K
 from .io import image_suffix, load_resized, to_float
 from .splits import SplitLine, SplitSource, read_split
+
+
+class EpochOrder(Sampler):
+    """A rank's shuffled order of one epoch as ``(epoch, index)`` keys of a :class:`FrameDataset`:
+    the keys carry the epoch to persistent loader workers, whose dataset copies cannot be told it."""
+
+    def __init__(self, dataset: Dataset, world: int, rank: int, seed: int) -> None:
+        self.shuffle = DistributedSampler(dataset, world, rank, shuffle=True, seed=seed, drop_last=True)
+        self.keys: list[tuple[int, int]] = []
+
+    def start(self, epoch: int, skip: int = 0) -> None:
+        """Epoch ``epoch``'s order from its ``skip``-th sample on (a resumed epoch)."""
+        self.shuffle.set_epoch(epoch)
+        self.keys = [(epoch, i) for i in list(self.shuffle)[skip:]]
+
+    def __iter__(self):
+        return iter(self.keys)
+
+    def __len__(self) -> int:
+        return len(self.keys)
 
 
 class FrameDataset(Dataset):
@@ -68,7 +88,6 @@ class FrameDataset(Dataset):
         self.calib_intrinsics = calib_intrinsics
         self.flip_prob, self.jitter_prob = (flip_prob, jitter_prob) if train else (0.0, 0.0)
         self.seed = seed
-        self.epoch = 0
         self.skip_incomplete = skip_incomplete
         self.cache = cache
         self.jpeg_draft = jpeg_draft
@@ -139,10 +158,6 @@ class FrameDataset(Dataset):
                 raise PoseconsError(f"{path}: unreadable image ({exc})") from exc
         return self._sizes[key]
 
-    def set_epoch(self, epoch: int) -> None:
-        """Select the epoch whose augmentation draws ``__getitem__`` reproduces."""
-        self.epoch = int(epoch)
-
     def __len__(self) -> int:
         return len(self.lines)
 
@@ -157,10 +172,13 @@ class FrameDataset(Dataset):
         image = torch.from_numpy(to_float(pixels))
         return image.flip(-1) if flip else image
 
-    def __getitem__(self, index: int) -> dict:
+    def __getitem__(self, key: int | tuple[int, int]) -> dict:
+        """Sample ``index`` or ``(epoch, index)``: a training sample's augmentation is drawn from its
+        seed, epoch and index (an int index is epoch 0), so it is the same in any loader worker."""
+        epoch, index = key if isinstance(key, tuple) else (0, key)
         line = self.lines[index]
         if self.train:
-            flip, jitter = draw_augmentation(sample_rng(self.seed, self.epoch, index), self.flip_prob, self.jitter_prob)
+            flip, jitter = draw_augmentation(sample_rng(self.seed, epoch, index), self.flip_prob, self.jitter_prob)
         else:
             flip, jitter = False, np.array(IDENTITY_JITTER, dtype=np.float32)
         like = None if self.cache is not None else self.reference_size(line)  # the cache build checked sizes

@@ -43,13 +43,14 @@ import torch.distributed as dist
 import yaml
 from torch.nn.parallel import DistributedDataParallel
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
-from torch.utils.data import DataLoader, DistributedSampler
+from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import Config
 from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
+from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
 from ..fileio import remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
@@ -159,6 +160,7 @@ class Trainer:
 
         train_file, val_file = split_files(config, data_path, split_dir)
         self.train_set = build_dataset(config, data_path, train_file, train=True)
+        self._train_loader: DataLoader | None = None  # made on first use, then serves every epoch
         if len(self.train_set) < t.batch_size * self.env.world:
             raise PoseconsError(
                 f"{train_file}: {len(self.train_set)} samples are fewer than one batch "
@@ -332,25 +334,24 @@ class Trainer:
 
     # ------------------------------------------------------------------ loop
     def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
-        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch)."""
+        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch). One loader
+        serves every epoch, so its workers persist; the sampler tells them the epoch."""
         t = self.config.train
-        self.train_set.set_epoch(epoch)
-        sampler = DistributedSampler(
-            self.train_set, self.env.world, self.env.rank, shuffle=True, seed=t.seed, drop_last=True
-        )
-        sampler.set_epoch(epoch)
-        indices = list(sampler)[skip_batches * t.batch_size :]
-        # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
-        return DataLoader(
-            self.train_set,
-            batch_size=t.batch_size,
-            sampler=indices,
-            drop_last=True,
-            num_workers=self.config.data.num_workers,
-            pin_memory=self.device.type == "cuda",
-            persistent_workers=False,
-            generator=torch.Generator().manual_seed(t.seed + epoch),
-        )
+        if self._train_loader is None:
+            workers = self.config.data.num_workers
+            self._train_loader = DataLoader(
+                self.train_set,
+                batch_size=t.batch_size,
+                sampler=EpochOrder(self.train_set, self.env.world, self.env.rank, t.seed),
+                drop_last=True,
+                num_workers=workers,
+                pin_memory=self.device.type == "cuda",
+                persistent_workers=workers > 0,
+                # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
+                generator=torch.Generator().manual_seed(t.seed),
+            )
+        self._train_loader.sampler.start(epoch, skip_batches * t.batch_size)
+        return self._train_loader
 
     def _autocast(self):
         dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.precision)
