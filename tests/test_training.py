@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from filelock import FileLock
 
 from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
@@ -163,6 +164,18 @@ def test_persistent_loader_workers_draw_each_epochs_augmentation(synth_data, tmp
     both = augs[0].keys() & augs[1].keys()
     assert len(both) >= 4 and not any(torch.equal(augs[0][i], augs[1][i]) for i in both)
     assert [b["index"].tolist() for b in trainer._loader(1, 2)] == [b["index"].tolist() for b in seen[1][2:]]
+
+
+def test_a_second_process_on_a_run_directory_stops_and_leaves_the_run_alone(synth_data, tmp_path):
+    run = tmp_path / "run"
+    train(tiny_config("train.max_steps=1", "train.val_every=0"), synth_data, run, quiet=True)
+    files = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
+    more = tiny_config("train.max_steps=2", "train.val_every=0")
+    with FileLock(run / ".lock", timeout=0):  # what a process training there holds
+        with pytest.raises(PoseconsError, match=f"{run}: another process is training this run"):
+            train(more, synth_data, run, resume=True, quiet=True)
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files
+    assert train(more, synth_data, run, resume=True, quiet=True)["steps"] == 2  # released: it resumes
 
 
 def test_collapse_signs_count_warped_pixels_and_far_pinned_disparities():

@@ -41,6 +41,7 @@ from typing import Any
 import torch
 import torch.distributed as dist
 import yaml
+from filelock import FileLock, Timeout
 from torch.nn.parallel import DistributedDataParallel
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import DataLoader
@@ -118,6 +119,25 @@ class StopRequest:
         finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+
+
+@contextlib.contextmanager
+def _hold_run_dir(out: Path):
+    """Hold ``out``'s lock while a process trains there: a second process on the same run directory
+    (two study sittings picking the same run, a repeated command) stops at once instead of writing
+    over the first one's checkpoints and logs."""
+    lock = FileLock(out / ".lock", timeout=0)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        lock.acquire()
+    except Timeout:
+        raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
+    except OSError as exc:
+        raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
+    try:
+        yield
+    finally:
+        lock.release()
 
 
 def _prepare_run_dir(out: Path, resume: bool) -> None:
@@ -674,15 +694,16 @@ def train(
     stop = StopRequest()
     with stop.installed():
         try:
-            trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
-            trainer.stop = stop
-            summary = trainer.fit()
+            with _hold_run_dir(out) if main else contextlib.nullcontext():
+                trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+                trainer.stop = stop
+                summary = trainer.fit()
+                if trainer.env.main:
+                    write_json(out / "train_summary.json", summary)
         except BaseException:
             if fresh and not (out / "checkpoints" / "last.pt").exists():
                 _discard(out, created)
             raise
-    if trainer.env.main:
-        write_json(Path(out) / "train_summary.json", summary)
     if dist.is_initialized():
         dist.barrier()
         dist.destroy_process_group()
