@@ -15,8 +15,7 @@ import sys
 from pathlib import Path
 
 from posecons.errors import PoseconsError
-from posecons.metrics.stats import mean_std
-from posecons.study.report import load_results, paired_metrics, paired_rows, paired_table
+from posecons.study.report import cell, load_results, paired_metrics, paired_rows, paired_table
 
 RAW = "@raw"
 
@@ -50,8 +49,7 @@ def main() -> None:
     print(f"\n| runs | {' | '.join(label for label, _, _ in metrics)} |")
     print("|---" * (len(metrics) + 1) + "|")
     for name in (args.a, args.b):
-        spread = [mean_std([get(r) for r in results if r["variant"] == name]) for _, get, _ in metrics]
-        cells = [f"{m:{fmt}} ± {s:{fmt}}" for (m, s), (_, _, fmt) in zip(spread, metrics)]
+        cells = [cell([get(r) for r in results if r["variant"] == name], fmt) for _, get, fmt in metrics]
         print(f"| {name} | {' | '.join(cells)} |")
     print()
     print(paired_table(paired_rows([args.a, args.b], results), args.a))

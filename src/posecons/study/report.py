@@ -81,7 +81,7 @@ def _values(results: Sequence[dict], get: Getter) -> dict[str, dict[int, float]]
     return out
 
 
-def _cell(values: Sequence[float], fmt: str) -> str:
+def cell(values: Sequence[float], fmt: str) -> str:
     """'mean ± std' over seeds; the mean alone for one seed; '–' for none."""
     mean, std = mean_std(values)
     if math.isnan(mean):
@@ -99,7 +99,7 @@ def _rows(names: Sequence[str], columns: Sequence[tuple[Getter, str]], results: 
     rows = []
     for name in names:
         mine = [r for r in results if r["variant"] == name]
-        rows.append([name, str(len(mine))] + [_cell([_number(get(r)) for r in mine], fmt) for get, fmt in columns])
+        rows.append([name, str(len(mine))] + [cell([_number(get(r)) for r in mine], fmt) for get, fmt in columns])
     return rows
 
 
@@ -156,7 +156,7 @@ def pose_tables(names: Sequence[str], results: Sequence[dict]) -> str:
         baseline = next(r for r in results if seq in r.get("pose", {}))  # the same for every run: GT only
         rows.append(
             ["constant velocity (no images)", "–"]
-            + [_cell([_number(_pose(seq, key, True)(baseline))], fmt) for key, _, fmt in POSE_COLUMNS]
+            + [cell([_number(_pose(seq, key, True)(baseline))], fmt) for key, _, fmt in POSE_COLUMNS]
         )
         text.append(
             f"### Odometry sequence {seq}\n\n" + _table(["variant", "n"] + [h for _, h, _ in POSE_COLUMNS], rows)
@@ -284,8 +284,8 @@ def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
                 v + (" (reference)" if v == variants[0] else ""),
                 ", ".join(f"`{o}`" for o in study["variants"][v]) or "–",
                 str(sum(r["variant"] == v for r in trained)),
-                _cell([r["steps"] for r in trained if r["variant"] == v], ".0f"),
-                _cell([r["train_minutes"] for r in trained if r["variant"] == v], ".1f"),
+                cell([r["steps"] for r in trained if r["variant"] == v], ".0f"),
+                cell([r["train_minutes"] for r in trained if r["variant"] == v], ".1f"),
             ]
             for v in variants
         ],
