@@ -559,7 +559,8 @@ class Trainer:
         if t.image_every and self.step % t.image_every == 0:
             self.writer.add_image("input", batch["frames"][0, 0], self.step)
             disp = outputs["disp"][0][0].detach().float()
-            self.writer.add_image("disparity", disp / disp.max(), self.step)
+            # floored: a disparity collapsed to 0 everywhere shows black instead of NaN
+            self.writer.add_image("disparity", disp / disp.max().clamp_min(torch.finfo(disp.dtype).tiny), self.step)
             self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
 
     def validate(self) -> dict[str, Any]:
