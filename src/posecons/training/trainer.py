@@ -126,21 +126,20 @@ def _hold_run_dir(out: Path):
     """Hold ``out``'s lock while a process trains there: a second process on the same run directory
     (two study sittings picking the same run, a repeated command) stops at once instead of writing
     over the first one's checkpoints and logs."""
+    _writable_dir(out)
     lock = FileLock(out / ".lock", timeout=0)
     try:
-        out.mkdir(parents=True, exist_ok=True)
         lock.acquire()
     except Timeout:
         raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
-    except OSError as exc:
-        raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
     try:
         yield
     finally:
         lock.release()
 
 
-def _prepare_run_dir(out: Path, resume: bool) -> None:
+def _writable_dir(out: Path) -> None:
+    """Make ``out`` if needed; an unwritable one is an error naming it."""
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".write_test"
@@ -148,6 +147,10 @@ def _prepare_run_dir(out: Path, resume: bool) -> None:
         probe.unlink()
     except OSError as exc:
         raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
+
+
+def _prepare_run_dir(out: Path, resume: bool) -> None:
+    _writable_dir(out)
     if not resume and (out / "checkpoints" / "last.pt").exists():
         raise PoseconsError(f"{out} already holds a run: pass --resume to continue it, or choose a new --out")
 
