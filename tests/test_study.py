@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
+from filelock import FileLock
 
 from posecons.checkpoint import load_checkpoint
 from posecons.cli import main
@@ -127,6 +128,46 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert main(argv) == 2  # a changed recipe does not mix with the runs already done
     assert "train.max_steps: 3 → 4" in capsys.readouterr().err
     assert len(calls) == 3
+
+
+@pytest.mark.slow
+def test_two_study_processes_share_a_folder_without_redoing_or_clashing(tmp_path, monkeypatch, capsys):
+    variants = {v: [f"loss.constraints=[{c}]"] for v, c in (("baseline", ""), ("cyc", "cyc"), ("id", "id"))}
+    spec, out = write_spec(tmp_path / "toy.yaml", variants=variants), tmp_path / "study"
+    argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu"]
+    calls, results = [], out / "results"
+    real_train, real_in_progress = runner.train, runner.run_in_progress
+    monkeypatch.setattr(
+        runner,
+        "train",
+        lambda c, d, run_dir, **kw: calls.append(run_dir.parent.name) or real_train(c, d, run_dir, **kw),
+    )
+
+    def meanwhile(run_dir):  # while this process looks at cyc, another one finishes id
+        if run_dir.parent.name == "cyc":
+            result = json.loads((results / "baseline_seed0.json").read_text())
+            result["variant"], result["config"]["loss"]["constraints"] = "id", ["id"]
+            (results / "id_seed0.json").write_text(json.dumps(result))
+        return real_in_progress(run_dir)
+
+    monkeypatch.setattr(runner, "run_in_progress", meanwhile)
+    cyc = out / "runs" / "cyc" / "seed0"
+    cyc.mkdir(parents=True)
+    with FileLock(cyc / ".lock", timeout=0):  # another process is training cyc
+        assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert calls == ["baseline"]
+    assert (
+        "skip cyc seed 0: another process is training it" in printed
+        and "skip id seed 0: finished by another" in printed
+    )
+    assert "1 runs trained or resumed now" in printed
+    assert [p.name for p in cyc.iterdir()] == [".lock"] and not (results / "cyc_seed0.json").exists()
+    assert "missing: cyc seed 0" in (out / "results.md").read_text()
+
+    monkeypatch.setattr(runner, "run_in_progress", real_in_progress)
+    assert main(argv) == 0  # that process gone: this one trains cyc, and only cyc
+    assert calls == ["baseline", "cyc"] and "runs done: 3 of 3" in (out / "results.md").read_text()
 
 
 def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):

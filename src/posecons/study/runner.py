@@ -11,6 +11,10 @@ The study folder::
     OUT/results/<variant>_seed<k>.json one evaluation each, written when it is complete: present = done
     OUT/results/untrained_seed<k>.json the untrained network of seed k, the reference row
     OUT/results.md, OUT/results/*.png  the report (or --report PATH)
+    OUT/.study.lock                    held while a study process prepares the data and reference rows
+
+Several study processes may share one folder (two terminals, two machines on a shared disk): a run
+that another one is training is skipped, and one finished meanwhile is not redone.
 
 Each run evaluates ``checkpoints/last.pt`` — the weights at the last step, chosen without ground
 truth — with frame and per-sequence median scaling, and its pose net on every test odometry sequence.
@@ -33,6 +37,7 @@ from typing import Any
 
 import torch
 import yaml
+from filelock import FileLock
 
 from ..checkpoint import describe_checkpoint, load_checkpoint
 from ..config import Config, config_from_dict
@@ -42,8 +47,8 @@ from ..data.synth import generate_synth
 from ..data.synth.oracle import oracle_disparities
 from ..errors import Interrupted, PoseconsError
 from ..evaluation import evaluate
-from ..fileio import write_json
-from ..training.trainer import save_initial_weights, train
+from ..fileio import check_writable, make_dirs, write_json
+from ..training.trainer import run_in_progress, save_initial_weights, train
 from .report import STUDY_FILE, read_json, write_report
 from .spec import FLOOR, UNTRAINED, StudySpec
 
@@ -69,10 +74,22 @@ class Progress:
     """One line per run start and finish, with the elapsed time and the runs left."""
 
     def __init__(self, total: int):
-        self.start, self.left = time.monotonic(), total
+        self.start, self.left, self.skipped = time.monotonic(), total, 0
 
     def line(self, text: str) -> None:
         print(f"[study {(time.monotonic() - self.start) / 60:6.1f} min] {text}", flush=True)
+
+    def taken(self, out: Path, variant: str, seed: int) -> bool:
+        """Whether another study process has finished or is training (variant, seed): then skip it."""
+        if (out / "results" / result_name(variant, seed)).is_file():
+            why = "finished by another process"
+        elif run_in_progress(out / "runs" / variant / f"seed{seed}"):
+            why = "another process is training it; run this command again later for its result"
+        else:
+            return False
+        self.left, self.skipped = self.left - 1, self.skipped + 1
+        self.line(f"skip {variant} seed {seed}: {why} ({self.left} runs left)")
+        return True
 
     def done(self, result: dict, started: float) -> None:
         self.left -= 1
@@ -276,6 +293,8 @@ def _run_side_by_side(
         while pending or running:
             while pending and len(running) < jobs and not (stopped or failed):
                 variant, seed = pending.pop(0)
+                if progress.taken(out, variant, seed):
+                    continue
                 run_dir = out / "runs" / variant / f"seed{seed}"
                 run_dir.mkdir(parents=True, exist_ok=True)
                 log = open(run_dir / "study.log", "a")  # noqa: SIM115 (closed when the run ends)
@@ -327,21 +346,45 @@ def run_study(
 ) -> int:
     """Every missing run of ``spec`` into ``out``, ``jobs`` at a time, rewriting ``report``
     (:func:`.report.write_report`, ``publish`` as there) after each one; returns the number of runs
-    trained or resumed."""
+    trained or resumed (not those another process finished or is training)."""
     check_existing(spec, out)
     results = out / "results"
 
     def refresh() -> None:
         write_report(results, report, spec.describe(), publish)
 
-    write_json(results / STUDY_FILE, spec.describe())
-    data = prepare_data(spec, out)
     env = environment(accelerator)
+    check_writable(out, folder=True)
+    make_dirs(out)
+    with FileLock(out / ".study.lock"):  # one process makes the data and the reference rows
+        data = _prepare(spec, out, env)
     done = [r for r in spec.runs() if (results / result_name(*r)).is_file()]
     todo = [r for r in spec.runs() if r not in done]
     progress = Progress(len(todo))
     progress.line(f"{len(done)} of {len(spec.runs())} runs done before, {len(todo)} to go")
 
+    if jobs > 1:
+        _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh)
+    for variant, seed in todo if jobs == 1 else []:
+        if progress.taken(out, variant, seed):
+            continue
+        progress.line(
+            f"start {variant} seed {seed} → {out / 'runs' / variant / f'seed{seed}'} ({progress.left} runs left)"
+        )
+        started = time.monotonic()
+        progress.done(train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env), started)
+        refresh()
+    if progress.skipped or not todo:  # else the last run's refresh wrote it
+        refresh()
+    return len(todo) - progress.skipped
+
+
+def _prepare(spec: StudySpec, out: Path, env: dict[str, str]) -> StudyData:
+    """The data, the test ground truth, and the reference rows (each seed's untrained network, the
+    renderer's depth) that a study folder needs before its runs; each is made once."""
+    results = out / "results"
+    write_json(results / STUDY_FILE, spec.describe())
+    data = prepare_data(spec, out)
     for seed in spec.seeds:  # the reference row: the initial weights every run of the seed starts from
         target = results / result_name(UNTRAINED, seed)
         if not target.is_file():
@@ -351,25 +394,13 @@ def run_study(
             result = {"variant": UNTRAINED, "seed": seed, "overrides": spec.run_overrides(spec.reference, seed)}
             result.update(config=config.to_dict(), checkpoint=describe_checkpoint(weights), train_minutes=0, steps=0)
             write_json(target, {**result, **evaluate_weights(weights, data), "environment": env, "finished": _now()})
-            progress.line(f"evaluated the untrained network of seed {seed}")
+            print(f"[study] evaluated the untrained network of seed {seed}", flush=True)
 
     floor = results / result_name(FLOOR, 0)
     if "synth" in spec.data and not floor.is_file():
         write_json(floor, {**depth_floor(spec, data), "environment": env, "finished": _now()})
-        progress.line("evaluated the renderer's own depth (the floor of every depth metric)")
-
-    if jobs > 1:
-        _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh)
-    for variant, seed in todo if jobs == 1 else []:
-        progress.line(
-            f"start {variant} seed {seed} → {out / 'runs' / variant / f'seed{seed}'} ({progress.left} runs left)"
-        )
-        started = time.monotonic()
-        progress.done(train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env), started)
-        refresh()
-    if not todo:  # else the last run's refresh wrote it
-        refresh()
-    return len(todo)
+        print("[study] evaluated the renderer's own depth (the floor of every depth metric)", flush=True)
+    return data
 
 
 def _now() -> str:

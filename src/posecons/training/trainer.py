@@ -121,13 +121,16 @@ class StopRequest:
                 signal.signal(s, handler)
 
 
+RUN_LOCK = ".lock"
+
+
 @contextlib.contextmanager
 def _hold_run_dir(out: Path):
     """Hold ``out``'s lock while a process trains there: a second process on the same run directory
     (two study sittings picking the same run, a repeated command) stops at once instead of writing
     over the first one's checkpoints and logs."""
     _writable_dir(out)
-    lock = FileLock(out / ".lock", timeout=0)
+    lock = FileLock(out / RUN_LOCK, timeout=0)
     try:
         lock.acquire()
     except Timeout:
@@ -136,6 +139,17 @@ def _hold_run_dir(out: Path):
         yield
     finally:
         lock.release()
+
+
+def run_in_progress(out: Path) -> bool:
+    """Whether another process is training in ``out`` now (holds its lock): a study skips that run."""
+    if not (out / RUN_LOCK).is_file():
+        return False
+    try:
+        with FileLock(out / RUN_LOCK, timeout=0):
+            return False
+    except Timeout:
+        return True
 
 
 def _writable_dir(out: Path) -> None:
