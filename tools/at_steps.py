@@ -1,0 +1,91 @@
+"""A study's runs evaluated as the runs of a shorter recipe, without training those: the lr schedule
+of the study recipes does not depend on train.max_steps (warm-up, then constant), so a run's weights
+after N steps are those of an N-step run. While a study trains, ``keep`` copies the weights from each
+run's ``last.pt`` (written every train.checkpoint_every steps) when it reaches one of the steps; then
+``evaluate`` runs the study's own evaluation on every copy and writes one result JSON per run and step,
+which tools/paired.py and ``posecons study --report-only`` read (docs/results.md §10).
+
+    python tools/at_steps.py keep runs/study_bf16 runs/study_bf16_at/weights --steps 400 500 &
+    python tools/at_steps.py evaluate study/synth_bf16 runs/study_bf16 runs/study_bf16_at/weights runs/study_bf16_at
+    python tools/paired.py runs/study_bf16_at/step400/results/baseline runs/study_bf16_at/step400/results/cyc
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import time
+from pathlib import Path
+
+import torch
+
+from posecons.checkpoint import load_checkpoint
+from posecons.fileio import atomic_write, write_json
+from posecons.study.runner import evaluate_weights, prepare_data, raw_weights_result, result_name
+from posecons.study.spec import load_spec
+
+NAME = re.compile(r"(?P<variant>.+)_seed(?P<seed>\d+)_step(?P<step>\d+)\.pt")
+
+
+def keep(study: Path, weights: Path, steps: set[int], poll: float = 15.0) -> None:
+    """Until stopped: copy each run's weights at ``steps`` to WEIGHTS/<variant>_seed<k>_step<N>.pt."""
+    weights.mkdir(parents=True, exist_ok=True)
+    seen: dict[Path, float] = {}
+    while True:
+        for last in study.glob("runs/*/seed*/checkpoints/last.pt"):
+            try:
+                mtime = last.stat().st_mtime
+                if seen.get(last) == mtime:
+                    continue
+                state = load_checkpoint(last)
+            except Exception:  # replaced while being read: the next round reads the new one
+                continue
+            seen[last] = mtime
+            run = last.parent.parent
+            target = weights / f"{run.parent.name}_{run.name}_step{state['step']}.pt"
+            if state["step"] in steps and not target.exists():
+                kept = {k: state[k] for k in ("config", "model", "raw_model", "step") if k in state}
+                atomic_write(target, lambda tmp, kept=kept: torch.save(kept, tmp))
+                print(f"{time.strftime('%H:%M:%S')} kept {target.name}", flush=True)
+        time.sleep(poll)
+
+
+def evaluate(spec_name: str, study: Path, weights: Path, out: Path) -> None:
+    """Each kept copy → OUT/step<N>/results/<variant>_seed<k>.json, as the study evaluates a run."""
+    spec = load_spec(spec_name)
+    data = prepare_data(spec, study)
+    for file in sorted(weights.glob("*_step*.pt")):
+        match = NAME.fullmatch(file.name)
+        if not match:
+            continue
+        variant, seed, step = match["variant"], int(match["seed"]), int(match["step"])
+        target = out / f"step{step}" / "results" / result_name(variant, seed)
+        if target.is_file():
+            continue
+        result = {"variant": variant, "seed": seed, "steps": step, "weights": str(file)}
+        result.update(evaluate_weights(file, data), **raw_weights_result(file, data))
+        write_json(target, result)
+        print(f"{target}: σ/μ {result['depth']['frame']['scale_cv']:.4f}", flush=True)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    k = sub.add_parser("keep", help="copy the runs' weights at the given steps while the study trains")
+    k.add_argument("study", type=Path)
+    k.add_argument("weights", type=Path)
+    k.add_argument("--steps", type=int, nargs="+", required=True)
+    e = sub.add_parser("evaluate", help="evaluate every kept copy as the study evaluates a run")
+    e.add_argument("spec")
+    e.add_argument("study", type=Path)
+    e.add_argument("weights", type=Path)
+    e.add_argument("out", type=Path)
+    args = p.parse_args()
+    if args.command == "keep":
+        keep(args.study, args.weights, set(args.steps))
+    else:
+        evaluate(args.spec, args.study, args.weights, args.out)
+
+
+if __name__ == "__main__":
+    main()
