@@ -237,6 +237,14 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         a, b = fast.config(v, 1), synth.config(v, 1)
         assert (a.train.precision, a.train.ema_decay) == ("bf16", 0.99) and b.train.precision == "32"
         assert a.loss == b.loss and a.model == b.model and a.data == b.data
+    # synth_fast is synth_bf16 stopped at 500 steps: its runs are the first 500 steps of synth_bf16's.
+    short = load_spec(copy.with_name("synth_fast.yaml"))
+    assert short.data == fast.data and list(short.variants) == list(fast.variants) and short.seeds == fast.seeds
+    for v in fast.variants:
+        a, b = short.config(v, 1), fast.config(v, 1)
+        assert a.train.max_steps == 500 < b.train.max_steps and b.train.checkpoint_every == 100
+        b.train.max_steps = 500
+        assert a.to_dict() == b.to_dict()
     ema = load_spec(copy.with_name("synth_ema.yaml"))
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss
