@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 import time
 from pathlib import Path
 
 import torch
 
 from posecons.checkpoint import load_checkpoint
+from posecons.errors import PoseconsError
 from posecons.fileio import atomic_write, write_json
 from posecons.study.runner import evaluate_weights, prepare_data, raw_weights_result, result_name
 from posecons.study.spec import load_spec
@@ -28,26 +30,34 @@ NAME = re.compile(r"(?P<variant>.+)_seed(?P<seed>\d+)_step(?P<step>\d+)\.pt")
 
 
 def keep(study: Path, weights: Path, steps: set[int], poll: float = 15.0) -> None:
-    """Until stopped: copy each run's weights at ``steps`` to WEIGHTS/<variant>_seed<k>_step<N>.pt."""
-    weights.mkdir(parents=True, exist_ok=True)
+    """Until stopped: every ``poll`` seconds, :func:`keep_new`."""
     seen: dict[Path, float] = {}
     while True:
-        for last in study.glob("runs/*/seed*/checkpoints/last.pt"):
-            try:
-                mtime = last.stat().st_mtime
-                if seen.get(last) == mtime:
-                    continue
-                state = load_checkpoint(last)
-            except Exception:  # replaced while being read: the next round reads the new one
-                continue
-            seen[last] = mtime
-            run = last.parent.parent
-            target = weights / f"{run.parent.name}_{run.name}_step{state['step']}.pt"
-            if state["step"] in steps and not target.exists():
-                kept = {k: state[k] for k in ("config", "model", "raw_model", "step") if k in state}
-                atomic_write(target, lambda tmp, kept=kept: torch.save(kept, tmp))
-                print(f"{time.strftime('%H:%M:%S')} kept {target.name}", flush=True)
+        for name in keep_new(study, weights, steps, seen):
+            print(f"{time.strftime('%H:%M:%S')} kept {name}", flush=True)
         time.sleep(poll)
+
+
+def keep_new(study: Path, weights: Path, steps: set[int], seen: dict[Path, float]) -> list[str]:
+    """Copy the weights of each run's ``last.pt`` not ``seen`` at its mtime to
+    WEIGHTS/<variant>_seed<k>_step<N>.pt where N is one of ``steps``; the names of the copies."""
+    kept = []
+    for last in study.glob("runs/*/seed*/checkpoints/last.pt"):
+        try:
+            mtime = last.stat().st_mtime
+            if seen.get(last) == mtime:
+                continue
+            state = load_checkpoint(last)
+        except (OSError, PoseconsError):  # replaced while being read: the next round reads the new one
+            continue
+        seen[last] = mtime
+        run = last.parent.parent
+        target = weights / f"{run.parent.name}_{run.name}_step{state['step']}.pt"
+        if state["step"] in steps and not target.exists():
+            copy = {k: state[k] for k in ("config", "model", "raw_model", "step") if k in state}
+            atomic_write(target, lambda tmp, copy=copy: torch.save(copy, tmp))
+            kept.append(target.name)
+    return kept
 
 
 def evaluate(spec_name: str, study: Path, weights: Path, out: Path) -> None:
@@ -81,10 +91,16 @@ def main() -> None:
     e.add_argument("weights", type=Path)
     e.add_argument("out", type=Path)
     args = p.parse_args()
-    if args.command == "keep":
-        keep(args.study, args.weights, set(args.steps))
-    else:
-        evaluate(args.spec, args.study, args.weights, args.out)
+    if not (args.study / "runs").is_dir():
+        p.exit(2, f"error: {args.study}: not a study folder (no runs/ in it)\n")
+    try:
+        if args.command == "keep":
+            keep(args.study, args.weights, set(args.steps))
+        else:
+            evaluate(args.spec, args.study, args.weights, args.out)
+    except PoseconsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":

@@ -25,7 +25,11 @@ def step_seconds(tb: Path) -> list[float]:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("studies", type=Path, nargs="+", help="study --out folders")
-    for study in p.parse_args().studies:
+    studies = p.parse_args().studies
+    for study in studies:
+        if not (study / "runs").is_dir():
+            p.exit(2, f"error: {study}: not a study folder (no runs/ in it)\n")
+    for study in studies:
         for tb in sorted(study.glob("runs/*/seed*/tb")):
             seconds = step_seconds(tb)
             if seconds:

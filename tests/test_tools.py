@@ -1,0 +1,52 @@
+"""tools/at_steps.py: a study run's weights are kept at the asked steps only, without the training
+state, once per checkpoint write; a folder that is no study is one line and exit status 2."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import torch
+
+from posecons.checkpoint import load_checkpoint
+
+TOOLS = Path(__file__).resolve().parents[1] / "tools"
+spec = importlib.util.spec_from_file_location("at_steps", TOOLS / "at_steps.py")
+at_steps = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(at_steps)
+
+
+def write_last(run: Path, step: int, mtime: float) -> Path:
+    last = run / "checkpoints" / "last.pt"
+    last.parent.mkdir(parents=True, exist_ok=True)
+    weights = {"w": torch.full((2,), float(step))}
+    state = {"config": {"k": 1}, "model": weights, "raw_model": weights, "step": step, "optimizer": {"lr": 1.0}}
+    torch.save(state, last)
+    os.utime(last, (mtime, mtime))
+    return last
+
+
+def test_keep_copies_the_weights_at_the_asked_steps_once(tmp_path):
+    study, weights, seen = tmp_path / "study", tmp_path / "kept", {}
+    cyc = study / "runs" / "cyc" / "seed2"
+    write_last(cyc, 300, 1.0)
+    write_last(study / "runs" / "baseline" / "seed0", 400, 1.0)
+    assert at_steps.keep_new(study, weights, {400, 500}, seen) == ["baseline_seed0_step400.pt"]
+    kept = load_checkpoint(weights / "baseline_seed0_step400.pt")
+    assert set(kept) == {"config", "model", "raw_model", "step"} and kept["model"]["w"].tolist() == [400.0, 400.0]
+    assert at_steps.keep_new(study, weights, {400, 500}, seen) == []  # no new checkpoint, no new copy
+    write_last(cyc, 500, 2.0)  # the next checkpoint of cyc
+    assert at_steps.keep_new(study, weights, {400, 500}, seen) == ["cyc_seed2_step500.pt"]
+    assert sorted(p.name for p in weights.iterdir()) == ["baseline_seed0_step400.pt", "cyc_seed2_step500.pt"]
+
+
+def test_a_folder_without_runs_is_one_line_and_exit_2(tmp_path):
+    for argv in (
+        ["at_steps.py", "keep", str(tmp_path), str(tmp_path / "w"), "--steps", "5"],
+        ["step_times.py", str(tmp_path)],
+    ):
+        done = subprocess.run([sys.executable, str(TOOLS / argv[0]), *argv[1:]], capture_output=True, text=True)
+        assert done.returncode == 2 and done.stderr.strip() == f"error: {tmp_path}: not a study folder (no runs/ in it)"
