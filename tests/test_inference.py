@@ -27,6 +27,7 @@ from posecons.inference.backend import Predictor
 from posecons.inference.camera import resolve_intrinsics
 from posecons.inference.io import FrameSource
 from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
+from posecons.inference.predict import gt_scale
 from posecons.inference.scale import camera_height
 from posecons.model import PoseConsModel
 
@@ -255,6 +256,14 @@ def test_calibration_from_ground_truth_recovers_a_known_scale(ckpt, frames_dir, 
     assert info["drift"]["cv"] < 1e-5 and info["drift"]["max_rel_deviation"] < 1e-5
     assert (out / "scale_drift.png").is_file()
     np.testing.assert_allclose(np.load(out / "depth" / "0000000003.npy"), gt["000003"], rtol=1e-4)
+
+
+def test_calibration_scale_uses_every_valid_pixel_without_crop_or_cap():
+    """predict's ground truth may come from any camera: no Garg crop and no 80 m cap (see frame_scale)."""
+    gt = np.zeros((10, 20), np.float32)
+    gt[0, :3] = [4.0, 6.0, 200.0]  # the top row lies outside the Garg crop; 200 m is beyond the cap
+    disparity = torch.full((1, 5, 10), 0.5)  # depth 2 everywhere once resized
+    assert gt_scale(gt, disparity) == pytest.approx(6.0 / 2.0)
 
 
 def test_calibration_from_16bit_png_folder(ckpt, frames_dir, base_run, tmp_path):

@@ -32,8 +32,8 @@ def test_mask_depth_limits():
     gt = np.zeros((375, 1242), np.float32)
     gt[200, 100:105] = [MIN_DEPTH, 0.5, 79.9, MAX_DEPTH, 120.0]
     assert valid_mask(gt, "garg")[200, 100:105].tolist() == [False, True, True, False, False]
-    # Improved GT: gt > 0 everywhere, no crop and no 80 m cap.
-    gt[0, 0] = 5.0
+    # Improved GT: finite gt > 0 everywhere, no crop and no 80 m cap.
+    gt[0, :2] = [5.0, np.inf]
     assert valid_mask(gt, "none").sum() == 6
 
 
@@ -135,12 +135,11 @@ def test_count_mismatch_names_both_inputs():
         evaluate_depth(np.stack([disp, disp]), [gt], ["a"], pred_name="pred.npy", gt_name="gt.npz")
 
 
-def test_frame_scale_resizes_the_disparity_and_skips_frames_without_gt():
-    gt = np.full((4, 6), 10.0)
-    gt[0] = 0.0  # invalid pixels are left out of the median
-    disp = np.full((2, 3), 0.5, np.float32)  # depth 2 everywhere
-    assert frame_scale(gt, disp) == pytest.approx(5.0)
-    assert np.isnan(frame_scale(np.zeros((4, 6)), disp))
+def test_frame_scale_takes_the_medians_over_the_mask_it_is_given():
+    gt, pred = np.array([[2.0, 4.0, 12.0, 90.0]]), np.array([[1.0, 4.0, 3.0, 1.0]])
+    assert frame_scale(gt, pred, valid_mask(gt, "none")) == pytest.approx(8 / 2)
+    assert frame_scale(gt, pred, gt < MAX_DEPTH) == pytest.approx(4 / 3)  # the 90 m pixel left out
+    assert np.isnan(frame_scale(gt, pred, np.zeros_like(gt, bool)))
 
 
 def test_drift_stats_ignore_nan_and_measure_the_deviation_from_the_chosen_scale():

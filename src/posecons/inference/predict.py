@@ -34,7 +34,7 @@ from ..data.gt import GroundTruth
 from ..data.trajectory_io import write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..fileio import output_dir
-from ..metrics.depth import drift_stats, frame_scale, resize_disparity
+from ..metrics.depth import drift_stats, frame_scale, resize_disparity, valid_mask
 from ..metrics.pose import global_from_relative
 from ..plots import colorize, plot_scale_drift, plot_trajectory_topview
 from . import scale as scaling
@@ -80,6 +80,12 @@ def full_size_depth(disparity: torch.Tensor, height: int, width: int) -> np.ndar
     return 1.0 / resize_disparity(disparity[0].float().cpu().numpy(), height, width)
 
 
+def gt_scale(gt: np.ndarray, disparity: torch.Tensor) -> float:
+    """The frame's median scale against (H, W) ground truth: every finite gt > 0, no crop and no cap
+    (see :func:`~posecons.metrics.depth.frame_scale`)."""
+    return frame_scale(gt, full_size_depth(disparity, *gt.shape), valid_mask(gt, "none"))
+
+
 def calibrate(
     source: FrameSource, predictor: Predictor, options: PredictOptions, K_norm: np.ndarray, gt: GroundTruth | None
 ) -> scaling.ScaleResult:
@@ -95,7 +101,7 @@ def calibrate(
                 target = gt.get(frame.name, frame.index)
                 if target is None:
                     continue
-                scales.append(frame_scale(target, disp[0].cpu().numpy()))
+                scales.append(gt_scale(target, disp))
             else:
                 depth = full_size_depth(disp, *frame.size)
                 height = scaling.camera_height(depth, normalised_to_pixel(K_norm, *frame.size))
@@ -161,7 +167,7 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
                     )
                 target = gt.get(frame.name, frame.index) if gt is not None else None
                 if target is not None:
-                    drift.append((frame.index, frame.name, frame_scale(target, disp[0].cpu().numpy())))
+                    drift.append((frame.index, frame.name, gt_scale(target, disp)))
                 times.append(frame.time)
                 count += 1
             bar.update(len(frames))

@@ -35,10 +35,10 @@ def valid_mask(gt: np.ndarray, crop: str = "garg") -> np.ndarray:
     """Boolean (H, W) mask of the GT pixels that are evaluated.
 
     ``garg``: 1e-3 < gt < 80 inside the Garg crop (Eigen split, LiDAR GT);
-    ``none``: gt > 0 everywhere (KITTI improved GT, eigen_benchmark).
+    ``none``: finite gt > 0 everywhere (KITTI improved GT, eigen_benchmark).
     """
     if crop == "none":
-        return gt > 0
+        return np.isfinite(gt) & (gt > 0)
     if crop != "garg":
         raise PoseconsError(f"unknown crop {crop!r}; expected one of {CROPS}")
     top, bottom, left, right = garg_crop_bounds(*gt.shape)
@@ -75,19 +75,19 @@ def compute_depth_metrics(gt: np.ndarray, pred: np.ndarray) -> dict[str, float]:
     }
 
 
-def median_scale(gt: np.ndarray, pred: np.ndarray) -> float:
-    """Median scaling factor median(gt) / median(pred) over matching 1-D arrays of valid depths."""
-    return float(np.median(gt) / np.median(pred))
+def frame_scale(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> float:
+    """The frame's median scale median(gt) / median(pred) over the pixels of ``mask``; gt and pred are
+    depths (H, W) at the GT size (pred resized as disparity, then inverted). NaN when ``mask`` is empty.
 
-
-def frame_scale(gt: np.ndarray, disparity: np.ndarray) -> float:
-    """median(gt) / median(pred) over the valid GT pixels; disparity (h, w) is resized to the GT
-    size first (SPEC §9). NaN when the frame has no valid pixel."""
-    valid = np.isfinite(gt) & (gt > 0)
-    if not valid.any():
+    The caller chooses the mask. :func:`evaluate_depth` passes :func:`valid_mask` of its crop (the Garg
+    crop and the 80 m cap for LiDAR GT): the published protocol, comparable with the literature.
+    ``predict``'s calibration and drift pass ``valid_mask(gt, "none")`` (every finite gt > 0): its GT
+    comes with any camera, not only the KITTI LiDAR the crop was cut for, and the scale it finds
+    multiplies every pixel of the saved depth, far ones included.
+    """
+    if not mask.any():
         return float("nan")
-    pred = 1.0 / resize_disparity(disparity, *gt.shape)
-    return median_scale(gt[valid], pred[valid])
+    return float(np.median(gt[mask]) / np.median(pred[mask]))
 
 
 def drift_stats(scales: np.ndarray, scale: float) -> dict:
@@ -227,19 +227,16 @@ def evaluate_depth(
         )
 
     # Pass 1: valid pixels and the per-frame median scale of every frame.
-    valid_pairs: list[tuple[np.ndarray, np.ndarray] | None] = []
+    valid_pairs: list[tuple[np.ndarray, np.ndarray]] = []
     scales = np.full(len(disps), np.nan)
     for i, (disp, gt) in enumerate(zip(disps, gt_depths)):
         gt = np.asarray(gt, dtype=np.float32)
         if gt.ndim != 2:
             raise PoseconsError(f"{gt_name}: frame {i} has shape {gt.shape}, expected (H, W)")
         mask = valid_mask(gt, crop)
-        if not mask.any():
-            valid_pairs.append(None)
-            continue
-        pred_depth = 1.0 / resize_disparity(disp, *gt.shape)[mask]
-        valid_pairs.append((gt[mask], pred_depth))
-        scales[i] = median_scale(gt[mask], pred_depth)
+        pred = 1.0 / resize_disparity(disp, *gt.shape)
+        valid_pairs.append((gt[mask], pred[mask]))
+        scales[i] = frame_scale(gt, pred, mask)  # NaN: no valid pixel, the frame is skipped
     evaluated = np.flatnonzero(np.isfinite(scales))
     if evaluated.size == 0:
         raise PoseconsError(f"{gt_name}: no frame has valid ground-truth pixels")
