@@ -63,12 +63,17 @@ def _frame(gt_depth: float, pred_depth: float, shape=(375, 1242)) -> tuple[np.nd
 
 
 def test_median_scaling_and_clamp():
-    disp, gt = _frame(10.0, 2.0)
-    r = evaluate_depth(disp[None], [gt], ["a"], scaling="frame")
-    assert r["scales"] == pytest.approx([5.0])
-    assert r["abs_rel"] == pytest.approx(0.0, abs=1e-6)
-    # No scaling: pred stays 2 m → abs rel 0.8; a prediction of 500 m is clamped to 80 m.
-    assert evaluate_depth(disp[None], [gt], ["a"], scaling="none")["abs_rel"] == pytest.approx(0.8)
+    """Mutations caught: the median of the ratios gt/pred, or a ratio of means, as the frame scale."""
+    # Three pixels, no crop: median(gt)/median(pred) = 4/3, while median(gt/pred) = 2 and
+    # mean(gt)/mean(pred) = 9/4 (the ratios are 2, 1, 4).
+    gt, pred = np.array([[2.0, 4.0, 12.0]], np.float32), np.array([[1.0, 4.0, 3.0]], np.float32)
+    r = evaluate_depth((1 / pred)[None], [gt], ["a"], scaling="frame", crop="none")
+    assert r["scales"] == pytest.approx([4 / 3])
+    # Scaled prediction 4/3, 16/3, 4 against 2, 4, 12: relative errors 1/3, 1/3, 2/3.
+    assert r["abs_rel"] == pytest.approx(4 / 9)
+    # No scaling: relative errors 1/2, 0, 3/4; a prediction of 500 m is clamped to 80 m.
+    unscaled = evaluate_depth((1 / pred)[None], [gt], ["a"], scaling="none", crop="none")
+    assert unscaled["abs_rel"] == pytest.approx(5 / 12)
     far, gt = _frame(10.0, 500.0)
     assert evaluate_depth(far[None], [gt], ["a"], scaling="none")["abs_rel"] == pytest.approx(7.0)
     # The clamp comes after scaling: a 0.5 m prediction scaled ×200 (GT 100 m, improved GT) is cut to 80 m.
