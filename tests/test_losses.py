@@ -87,10 +87,13 @@ def test_cycle_zero_for_exact_composition():
 
 
 def test_identity_loss():
+    """Mutation caught: ‖·‖₂ instead of ‖·‖₁ (the vectors here have several non-zero entries)."""
     aa, t = torch.zeros(3, 1, 3), torch.zeros(3, 1, 3)
     assert identity_loss(aa, t).item() == 0
-    aa[0, 0, 0], t[1, 0, 2] = 0.3, -0.6
-    assert identity_loss(aa, t).item() == pytest.approx(0.3)
+    aa[0, 0] = torch.tensor([0.3, -0.4, 0.0])  # ‖·‖₁ = 0.7, ‖·‖₂ = 0.5
+    t[0, 0] = torch.tensor([0.1, 0.2, -0.2])  # ‖·‖₁ = 0.5, ‖·‖₂ = 0.3
+    t[1, 0, 2] = -0.6
+    assert identity_loss(aa, t).item() == pytest.approx((0.7 + 0.5 + 0.6 + 0) / 3)  # the mean over the batch
 
 
 def test_bad_inputs_raise_value_error():
