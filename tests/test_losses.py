@@ -1,3 +1,5 @@
+import math
+
 import pytest
 import torch
 
@@ -63,15 +65,20 @@ def test_min_reprojection_takes_per_pixel_minimum():
 
 
 def test_smoothness_zero_for_constant_disparity_and_edge_aware():
+    """Mutations caught: no mean normalisation; the channel sum in place of mean_c; the y term left out."""
     img = torch.rand(1, 3, 8, 8)
     assert smoothness_loss(torch.full((1, 1, 8, 8), 0.3), img).item() == pytest.approx(0.0, abs=1e-7)
-    disp = torch.zeros(1, 1, 8, 8)
-    disp[..., 4:] = 1.0  # a disparity edge between columns 3 and 4
+    # A vertical step 1 → 3 between columns 3 and 4: mean 2, so the normalised step is 1, in one of
+    # the 7 horizontal differences of each row; no vertical differences.
+    disp = torch.ones(1, 1, 8, 8)
+    disp[..., 4:] = 3.0
     flat, edge = torch.zeros(1, 3, 8, 8), torch.zeros(1, 3, 8, 8)
-    edge[..., 4:] = 1.0  # an image edge at the same place makes the step cheaper
-    assert smoothness_loss(disp, edge) < smoothness_loss(disp, flat)
+    edge[..., 4:] = torch.tensor([0.3, 0.6, 0.9])[:, None, None]  # an image edge there: mean_c |∂x I| = 0.6
+    assert smoothness_loss(disp, flat).item() == pytest.approx(1 / 7)
+    assert smoothness_loss(disp, edge).item() == pytest.approx(math.exp(-0.6) / 7)
+    assert smoothness_loss(disp.mT, edge.mT).item() == pytest.approx(math.exp(-0.6) / 7)  # the same in y
     # scale invariance: the disparity is mean-normalised inside
-    assert torch.allclose(smoothness_loss(disp * 7, flat), smoothness_loss(disp, flat))
+    assert smoothness_loss(disp * 7, edge).item() == pytest.approx(math.exp(-0.6) / 7)
 
 
 def test_forward_backward_zero_for_exact_inverse():
