@@ -58,17 +58,19 @@ def test_snippet_ate_zero_for_perfect_and_scaled_predictions():
 
 
 def test_snippet_ate_by_hand():
-    # GT moves 1 m along z per step; the prediction moves along z then sideways by 1 in its last step.
-    gt = np.stack([_pose(np.eye(3), [0, 0, 1])] * 4)
-    pred = np.stack([_pose(np.eye(3), [0, 0, 1])] * 3 + [_pose(np.eye(3), [1, 0, 0])])
-    # Positions: gt z = 0..4; pred (0,0,0),(0,0,1),(0,0,2),(0,0,3),(1,0,3).
-    # s = Σgt·pred / Σpred² = (1+4+9+12)/(1+4+9+10) = 26/24.
-    s = 26 / 24
-    residual = (s - 1) ** 2 * (1 + 4 + 9) + (s * 1) ** 2 + (3 * s - 4) ** 2
+    """Mutation caught: left- instead of right-multiplication of the steps (acc = step @ acc)."""
+    # GT: 1 m along z each step, turning 90° about y, then 90° about x (they do not commute), then straight.
+    z = [0, 0, 1]
+    R_y, R_x = _rotation([0, 1, 0], np.pi / 2), _rotation([1, 0, 0], np.pi / 2)  # z ↦ x; z ↦ −y
+    gt = np.stack([_pose(R_y, z), _pose(R_x, z), _pose(np.eye(3), z), _pose(np.eye(3), z)])
+    pred = np.stack([_pose(np.eye(3), z)] * 4)  # straight on: positions (0, 0, k)
+    # GT positions t0, t0 + R_y·t1, … + R_y·R_x·t2, …: (0,0,0), (0,0,1), (1,0,1), (1,−1,1), (1,−2,1).
+    # s = Σgt·pred / Σpred² = (1 + 2 + 3 + 4) / (1 + 4 + 9 + 16) = 1/3, and the residual
+    # Σ‖s·pred − gt‖² = 4/9 + 10/9 + 2 + 46/9 = 26/3.
     errors = snippet_errors(pred, gt)
-    assert errors[0] == pytest.approx(np.sqrt(residual) / 5)
+    assert errors[0] == pytest.approx(np.sqrt(26 / 3) / 5)
     assert len(errors) == 4  # start frames 0 … N−2, shorter snippets at the end
-    assert errors[3] == pytest.approx(np.sqrt(1.0) / 2)  # lone sideways step: s = 0, error |gt| / 2
+    assert errors[2:] == pytest.approx([0, 0], abs=1e-12)  # the straight end agrees exactly
 
 
 def test_snippet_ate_on_real_odometry_09(kitti_dir):
