@@ -94,15 +94,22 @@ def test_snippet_ate_on_real_odometry_09(kitti_dir):
 
 
 def test_umeyama_recovers_a_similarity():
-    rng = np.random.default_rng(1)
-    src = rng.standard_normal((50, 3))
-    R = _rotation([1, 2, 3], 0.7)
-    s, t = 2.5, np.array([1.0, -2.0, 0.5])
+    """Mutations caught: no reflection correction (S = I); S from the sign of det(Σ), which is 0 for planar points."""
+    R, s, t = _rotation([1, 0, 0], 0.3), 2.5, np.array([1.0, -2.0, 0.5])
+    # A drive on flat ground is planar (y = 0): U·Vᵀ of a rank-2 Σ can be a reflection, as it is here
+    # with numpy's SVD, and only the correction from det(U)·det(V) makes it the rotation.
+    src = _drive(30)[:, :3, 3]
     dst = s * src @ R.T + t
     s_hat, R_hat, t_hat = umeyama(src, dst)
     assert s_hat == pytest.approx(s) and np.allclose(R_hat, R) and np.allclose(t_hat, t)
     poses = np.stack([_pose(np.eye(3), p) for p in src])
     assert np.allclose(apply_sim3(poses, s, R, t)[:, :3, 3], dst)
+    # Points ±3 x, ±2 y, ±1 z seen in a mirror z ↦ −z: Σ = s·R·diag(3, 4/3, −1/3), whose U·Vᵀ is R times
+    # the mirror. The best rotation is R, giving up the least spread axis: ŝ = s·(3 + 4/3 − 1/3)/(14/3).
+    src = np.concatenate([np.diag([3.0, 2.0, 1.0]), -np.diag([3.0, 2.0, 1.0])])
+    dst = s * src @ np.diag([1.0, 1.0, -1.0]) @ R.T + t
+    s_hat, R_hat, t_hat = umeyama(src, dst)
+    assert s_hat == pytest.approx(s * 6 / 7) and np.allclose(R_hat, R) and np.allclose(t_hat, t)
 
 
 def test_full_metrics_on_a_short_sequence():
