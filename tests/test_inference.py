@@ -9,19 +9,20 @@ from pathlib import Path
 
 import av
 import numpy as np
+import onnxruntime as ort
 import pytest
 import torch
 from PIL import Image
 
 from posecons.checkpoint import load_model, save_checkpoint
 from posecons.cli import main
-from posecons.config import load_config
+from posecons.config import PRESETS, load_config
 from posecons.data.calib import read_calib_intrinsics
 from posecons.data.io import resize_rgb
 from posecons.data.synth import drive_folder, generate_synth
 from posecons.data.trajectory_io import read_kitti_poses, read_tum
 from posecons.fileio import MANIFEST
-from posecons.geometry import backproject
+from posecons.geometry import backproject, pose_vec_to_mat
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor
 from posecons.inference.camera import resolve_intrinsics
@@ -464,6 +465,29 @@ def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, bas
     with pytest.raises(Exception, match="differs from PyTorch"):  # a tolerance nothing meets fails the export
         export_model(ckpt, tmp_path / "strict", tolerance=-1.0)
     assert _leftovers(tmp_path / "strict") == []
+
+
+def test_export_of_a_mirrored_pose_net_matches_pytorch_at_batch_1_and_2(tmp_path):
+    """Every synth preset averages each pair's pose with its mirror image's (pose_mirror), splitting
+    the batch by its size: ONNX Runtime must agree with PyTorch at batch 1 (traced) and 2.
+
+    Mutations caught: the batch size frozen into the trace (``n = int(image_a.shape[0])``); a pose graph
+    without the mirror average (2 % off, inside export_model's absolute tolerance)."""
+    cfg = load_config(PRESETS / "synth" / "demo.yaml")
+    assert cfg.model.pose_mirror
+    torch.manual_seed(0)
+    model = PoseConsModel(cfg).eval()
+    save_checkpoint(tmp_path / "mirror.pt", {"config": cfg.to_dict(), "model": model.state_dict()})
+    export_model(tmp_path / "mirror.pt", tmp_path / "export")
+    session = ort.InferenceSession(str(tmp_path / "export" / "pose.onnx"), providers=["CPUExecutionProvider"])
+    for batch in (1, 2):
+        a, b = torch.rand(2, batch, 3, cfg.model.height, cfg.model.width)
+        pose, matrix = session.run(["pose", "matrix"], {"image_a": a.numpy(), "image_b": b.numpy()})
+        with torch.no_grad():
+            rot, t = model.pose_net(a, b)
+        # Relative: an untrained pose net's outputs (~1e-4) are below export_model's absolute tolerance.
+        np.testing.assert_allclose(pose, torch.cat([rot, t], -1)[:, 0].numpy(), rtol=1e-4, atol=1e-9)
+        np.testing.assert_allclose(matrix, pose_vec_to_mat(rot, t).numpy(), rtol=1e-4, atol=1e-9)
 
 
 # ----------------------------------------------------------------------------- bad input
