@@ -27,7 +27,7 @@ DEPTH_KEYS = {
     "n_skipped",
     "skipped",
 }
-POSE_KEYS = {"ate_mean", "ate_std", "n_snippets", "ate_full_rmse", "rpe_trans", "rpe_rot", "const_velocity"}
+POSE_KEYS = {"ate_mean", "ate_std", "n_snippets", "ate_full_rmse", "t_err", "r_err", "alignment", "const_velocity"}
 
 
 def _write_gt(path, maps, lines):
@@ -134,6 +134,28 @@ def test_evaluate_pose_from_a_trajectory_file(pose_files, kitti_dir):
     assert np.allclose(times, np.arange(120) / 10)
     assert np.allclose(written, read_kitti_poses(out / "traj" / "trajectory_kitti.txt"), atol=1e-6)
     assert (out / "traj" / "trajectory.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("align", ["7dof", "6dof"])
+def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, align):
+    """All of odometry 09 predicted exactly but at half the scale: Sim(3) makes t_err zero, SE(3) leaves half
+    of each segment's chord as error (t_err under 50 %). Catches --align not reaching the metrics or the print."""
+    gt_file = kitti_dir / "odometry" / "poses" / "09.txt"
+    pred = read_kitti_poses(gt_file)
+    pred[:, :3, 3] *= 0.5
+    write_kitti_poses(tmp_path / "pred.txt", pred)
+    argv = ["evaluate-pose", "--pred-poses", str(tmp_path / "pred.txt"), "--gt-poses", str(gt_file)]
+    assert main([*argv, "--align", align, "--json", str(tmp_path / "pose.json")]) == 0
+    result = json.loads((tmp_path / "pose.json").read_text())
+    assert result["alignment"] == result["const_velocity"]["alignment"] == align
+    if align == "7dof":
+        assert result["t_err"] == pytest.approx(0.0, abs=1e-4) and result["r_err"] == pytest.approx(0.0, abs=1e-4)
+    else:
+        assert 30 < result["t_err"] < 50 and result["r_err"] == pytest.approx(0.0, abs=1e-4)
+    out = capsys.readouterr().out
+    assert (
+        f"t_err / r_err: {align} alignment, {result['n_segments']} segments of 100–800 m (the devkit's lengths)" in out
+    )
 
 
 def test_evaluate_pose_bad_input(pose_files, capsys):

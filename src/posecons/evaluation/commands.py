@@ -56,7 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser(
         "evaluate-pose",
-        help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
+        help="snippet ATE, full ATE, KITTI t_err / r_err and a constant-velocity baseline",
         description="Evaluate predicted ego-motion against KITTI odometry poses.",
     )
     src = p.add_mutually_exclusive_group(required=True)
@@ -71,6 +71,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=pose.CONST_VELOCITY_MODES,
         default="first",
         help="baseline: repeat the first GT step, or the previous GT step",
+    )
+    p.add_argument(
+        "--align",
+        choices=pose.ALIGNMENTS,
+        default="7dof",
+        help="alignment before t_err / r_err: Sim(3) (monocular) or SE(3) (metric: the devkit's own numbers)",
     )
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
@@ -195,15 +201,16 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
         checkpoint = None
 
-    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses))
+    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")
     for name, r in (("prediction", result), (f"const. velocity ({args.const_velocity})", result["const_velocity"])):
         print(
             f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
-            f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m"
+            f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | t_err {r['t_err']:.2f} % r_err {r['r_err']:.2f} °/100 m"
         )
+    print(f"t_err / r_err: {evaluate.segments_note(result)}")
     if args.json:
         write_json(args.json, result)
     if args.out_dir:

@@ -83,11 +83,24 @@ def pose_result(
     const_velocity: str = "first",
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
+    alignment: str = "7dof",
 ) -> dict:
     """:func:`~posecons.metrics.pose.evaluate_pose` of (N, 4, 4) camera → world poses, with provenance."""
-    result = evaluate_pose(estimate, gt, const_velocity)
+    result = evaluate_pose(estimate, gt, const_velocity, alignment)
     result.update(predictions=pred_name, ground_truth=gt_name)
     return result
+
+
+def segments_note(result: dict) -> str:
+    """How a pose result's t_err / r_err were measured, in words: alignment, segment count and lengths."""
+    lengths = result["segment_lengths"]
+    if not lengths:
+        return f"{result['alignment']} alignment, no segment (the ground truth never moves)"
+    kind = "the devkit's" if result["devkit_lengths"] else "10–80 % of a path under 100 m, not the devkit's"
+    return (
+        f"{result['alignment']} alignment, {result['n_segments']} segments of "
+        f"{lengths[0]:.4g}–{lengths[-1]:.4g} m ({kind} lengths)"
+    )
 
 
 def checkpoint_depth(
@@ -101,7 +114,7 @@ def checkpoint_depth(
 
 
 def checkpoint_pose(checkpoint: Path, odometry: Path, sequence: str, out_dir: Path | None = None) -> dict:
-    """:func:`pose_result` (snippet ATE, full ATE / RPE, constant-velocity baseline) of a checkpoint's
+    """:func:`pose_result` (snippet ATE, full ATE, t_err / r_err, constant-velocity baseline) of a checkpoint's
     chained steps on odometry ``sequence`` (ground truth ``odometry/poses/<NN>.txt``); with ``out_dir``
     also its trajectory files and top view (:func:`write_trajectories`)."""
     gt_file = Path(odometry) / "poses" / f"{int(sequence):02d}.txt"
