@@ -13,7 +13,7 @@ import numpy as np
 from ..data.gt import load_gt
 from ..data.kitti_odometry import list_sequence_frames
 from ..data.kitti_raw import split_image_paths
-from ..data.splits import SplitLine, SplitSource
+from ..data.splits import SplitLine, SplitSource, read_split
 from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
@@ -60,6 +60,7 @@ def depth_result(
     gt_kind: str = "lidar",
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
+    scale_factor: float = 1.0,
 ) -> dict:
     """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
     N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
@@ -72,9 +73,23 @@ def depth_result(
         crop=CROP_FOR_GT_KIND[gt_kind],
         pred_name=pred_name,
         gt_name=gt_name,
+        scale_factor=scale_factor,
     )
     result.update(gt_kind=gt_kind, predictions=pred_name, skipped_lines=[str(lines[i]) for i in result["skipped"]])
     return result
+
+
+def eigen_to_benchmark(disps: np.ndarray, lines: Sequence[SplitLine], pred_name: str = "predictions") -> np.ndarray:
+    """The disparities of the bundled Eigen test split (all its frames, in its order) that belong to
+    ``lines``, in their order — the 652 eigen_benchmark frames, scored against the improved ground
+    truth, as Monodepth2's ``--eval_eigen_to_benchmark``."""
+    eigen = {str(line): i for i, line in enumerate(read_split("eigen"))}
+    if len(disps) != len(eigen):
+        raise PoseconsError(f"{pred_name} has {len(disps)} frames, not the {len(eigen)} of the Eigen test split")
+    for line in lines:
+        if str(line) not in eigen:
+            raise PoseconsError(f"{line.where}: '{line}' is not a frame of the Eigen test split")
+    return disps[[eigen[str(line)] for line in lines]]
 
 
 def pose_result(
