@@ -250,6 +250,27 @@ CASES = [
     ),
     ("evaluate-depth-no-gt", "evaluate-depth --pred-disps {in}/random.npy", ["--pred-disps needs --gt"]),
     (
+        "evaluate-depth-scale-factor-with-median-scaling",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --scale-factor 5.4",
+        ["--scale-factor needs --scaling none"],
+    ),
+    (
+        "evaluate-depth-scale-factor-0",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --scaling none --scale-factor 0",
+        ["--scale-factor", "> 0"],
+    ),
+    (
+        "evaluate-depth-eigen-to-benchmark-lidar",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --eigen-to-benchmark --gt-kind lidar",
+        ["--eigen-to-benchmark", "not --gt-kind lidar"],
+    ),
+    (
+        "evaluate-depth-eigen-to-benchmark-checkpoint",
+        "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
+        "--split-file {syn}/splits/synth/test_files.txt --gt {in}/gt.npz --eigen-to-benchmark",
+        ["--eigen-to-benchmark", "--pred-disps"],
+    ),
+    (
         "evaluate-depth-random-npy",
         "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz",
         ["random.npy", "not a .npy array of numbers"],
@@ -293,6 +314,11 @@ CASES = [
         "evaluate-pose-nan-poses",
         "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {in}/nan_poses.txt",
         ["nan_poses.txt:1", "NaN"],
+    ),
+    (
+        "evaluate-pose-align-unknown",
+        "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {in}/two_poses.txt --align 5dof",
+        ["--align", "'5dof'"],
     ),
     (
         "evaluate-pose-count-mismatch",

@@ -27,7 +27,7 @@ DEPTH_KEYS = {
     "n_skipped",
     "skipped",
 }
-POSE_KEYS = {"ate_mean", "ate_std", "n_snippets", "ate_full_rmse", "rpe_trans", "rpe_rot", "const_velocity"}
+POSE_KEYS = {"ate_mean", "ate_std", "n_snippets", "ate_full_rmse", "t_err", "r_err", "alignment", "const_velocity"}
 
 
 def _write_gt(path, maps, lines):
@@ -100,6 +100,43 @@ def test_evaluate_depth_bad_input_names_the_file(depth_files, capsys):
     )
 
 
+def test_evaluate_depth_with_a_fixed_scale_factor(tmp_path, capsys):
+    """GT 10 m everywhere, disparity 0.54 (1.85 m): --scaling none --scale-factor 2.7 predicts 5 m, abs rel
+    exactly 0.5. Catches the factor not applied (abs rel 0.81) or not passed on from the command line."""
+    _write_gt(tmp_path / "gt.npz", [np.full((40, 124), 10.0)] * 2, [f"{DRIVE} 1 l", f"{DRIVE} 2 l"])
+    np.save(tmp_path / "pred.npy", np.full((2, 16, 48), 0.54, np.float32))
+    argv = ["evaluate-depth", "--pred-disps", str(tmp_path / "pred.npy"), "--gt", str(tmp_path / "gt.npz")]
+    assert main([*argv, "--scaling", "none", "--scale-factor", "2.7", "--json", str(tmp_path / "d.json")]) == 0
+    result = json.loads((tmp_path / "d.json").read_text())
+    assert result["abs_rel"] == pytest.approx(0.5, rel=1e-6) and result["scale_factor"] == 2.7
+    assert "scaling none × 2.7" in capsys.readouterr().out  # bad values: tests/test_bad_inputs.py
+
+
+def test_evaluate_depth_eigen_to_benchmark(tmp_path, capsys):
+    """Predictions for the 697 Eigen test frames, each a constant depth 1 + i/10 m (i: its Eigen index);
+    improved GT on the 652 eigen_benchmark lines holding the depth of their Eigen frame. Picking the
+    right frames gives abs rel 0, any other pick does not; the GT kind becomes improved (no crop).
+    Catches predictions taken in benchmark order without the look-up, and a LiDAR protocol."""
+    from posecons.data.splits import read_split
+
+    eigen = [str(line) for line in read_split("eigen")]
+    bench = [str(line) for line in read_split("eigen_benchmark")]
+    depths = 1 + np.arange(len(eigen)) / 10
+    maps = [np.full((8, 16), depths[eigen.index(line)]) for line in bench]
+    _write_gt(tmp_path / "gt.npz", maps, bench)
+    np.save(tmp_path / "pred.npy", (1 / depths[:, None, None] * np.ones((1, 4, 8))).astype(np.float32))
+    argv = ["evaluate-depth", "--pred-disps", str(tmp_path / "pred.npy"), "--gt", str(tmp_path / "gt.npz")]
+    assert main([*argv, "--eigen-to-benchmark", "--scaling", "none", "--json", str(tmp_path / "d.json")]) == 0
+    result = json.loads((tmp_path / "d.json").read_text())
+    assert result["n_frames"] == 652 and result["abs_rel"] == pytest.approx(0.0, abs=1e-6)
+    assert result["gt_kind"] == "improved" and result["crop"] == "none" and result["eigen_to_benchmark"]
+    capsys.readouterr()
+    np.save(tmp_path / "short.npy", np.ones((696, 4, 8), np.float32))
+    short = ["evaluate-depth", "--pred-disps", str(tmp_path / "short.npy"), "--gt", str(tmp_path / "gt.npz")]
+    assert main([*short, "--eigen-to-benchmark"]) == 2
+    assert "short.npy has 696 frames, not the 697 of the Eigen test split" in capsys.readouterr().err
+
+
 @pytest.fixture
 def pose_files(tmp_path, kitti_dir):
     """The first 120 poses of odometry 09 and a noisy prediction at another scale."""
@@ -134,6 +171,28 @@ def test_evaluate_pose_from_a_trajectory_file(pose_files, kitti_dir):
     assert np.allclose(times, np.arange(120) / 10)
     assert np.allclose(written, read_kitti_poses(out / "traj" / "trajectory_kitti.txt"), atol=1e-6)
     assert (out / "traj" / "trajectory.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("align", ["7dof", "6dof"])
+def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, align):
+    """All of odometry 09 predicted exactly but at half the scale: Sim(3) makes t_err zero, SE(3) leaves half
+    of each segment's chord as error (t_err under 50 %). Catches --align not reaching the metrics or the print."""
+    gt_file = kitti_dir / "odometry" / "poses" / "09.txt"
+    pred = read_kitti_poses(gt_file)
+    pred[:, :3, 3] *= 0.5
+    write_kitti_poses(tmp_path / "pred.txt", pred)
+    argv = ["evaluate-pose", "--pred-poses", str(tmp_path / "pred.txt"), "--gt-poses", str(gt_file)]
+    assert main([*argv, "--align", align, "--json", str(tmp_path / "pose.json")]) == 0
+    result = json.loads((tmp_path / "pose.json").read_text())
+    assert result["alignment"] == result["const_velocity"]["alignment"] == align
+    if align == "7dof":
+        assert result["t_err"] == pytest.approx(0.0, abs=1e-4) and result["r_err"] == pytest.approx(0.0, abs=1e-4)
+    else:
+        assert 30 < result["t_err"] < 50 and result["r_err"] == pytest.approx(0.0, abs=1e-4)
+    out = capsys.readouterr().out
+    assert (
+        f"t_err / r_err: {align} alignment, {result['n_segments']} segments of 100–800 m (the devkit's lengths)" in out
+    )
 
 
 def test_evaluate_pose_bad_input(pose_files, capsys):

@@ -1,4 +1,5 @@
-"""Pose maths: quaternions, snippet ATE (SPEC §10), Sim(3) alignment, RPE and the constant-velocity baseline."""
+"""Pose maths: quaternions, snippet ATE (SPEC §10), Sim(3) alignment, the KITTI devkit's t_err / r_err and the
+constant-velocity baseline."""
 
 import numpy as np
 import pytest
@@ -11,9 +12,9 @@ from posecons.metrics.pose import (
     evaluate_pose,
     global_from_relative,
     invert_rigid,
+    odometry_errors,
     quaternion_to_rotation,
     relative_from_global,
-    relative_pose_error,
     rotation_to_quaternion,
     snippet_errors,
     umeyama,
@@ -87,7 +88,7 @@ def test_snippet_ate_on_real_odometry_09(kitti_dir):
     exact = evaluate_pose(gt_global, gt_global)
     assert exact["ate_mean"] == pytest.approx(0.0, abs=1e-9) and exact["ate_full_rmse"] == pytest.approx(0.0, abs=1e-9)
     assert r["sim3_scale"] == pytest.approx(1 / 0.3, rel=0.05)
-    assert r["rpe_lengths"] == [100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0]
+    assert r["segment_lengths"] == [100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0] and r["devkit_lengths"]
     # A constant-velocity model with no images scores a comparable snippet ATE, but not on the full trajectory.
     cv = r["const_velocity"]
     assert cv["ate_mean"] < 0.1 and cv["ate_full_rmse"] > 20 * r["ate_full_rmse"]
@@ -116,24 +117,107 @@ def test_full_metrics_on_a_short_sequence():
     G = _drive(100)  # ~99 m: shorter than KITTI's 100 m segments
     r = evaluate_pose(G, G)
     assert r["ate_full_rmse"] == pytest.approx(0.0, abs=1e-9)
-    assert r["rpe_trans"] == pytest.approx(0.0, abs=1e-9) and r["rpe_rot"] == pytest.approx(0.0, abs=1e-9)
-    assert r["rpe_lengths"] == pytest.approx([99.0 * k / 10 for k in range(1, 9)], rel=1e-3)
-    assert r["rpe_n_segments"] > 100
+    # arccos near 1 turns rounding into ~1e-8 rad: r_err is zero to 1e-6 °/100 m.
+    assert r["t_err"] == pytest.approx(0.0, abs=1e-9) and r["r_err"] == pytest.approx(0.0, abs=1e-6)
+    assert r["segment_lengths"] == pytest.approx([99.0 * k / 10 for k in range(1, 9)], rel=1e-3)
+    assert r["n_segments"] > 100 and not r["devkit_lengths"]
 
 
-def test_rpe_of_a_known_error():
+def test_short_path_segments_of_a_known_error():
     # Straight drive, 1 m a frame, 60 frames (59 m → segment lengths 5.9 k m); the prediction is 10 % too long.
-    G = global_from_relative(np.stack([_pose(np.eye(3), [0, 0, -1.0])] * 59))
+    G = _straight(60, 1.0)
     stretched = G.copy()
     stretched[:, :3, 3] *= 1.1
-    r = relative_pose_error(stretched, G)
+    r = odometry_errors(stretched, G, "6dof")
     # Each segment ends at the first frame beyond L, floor(L) + 1 frames on: error 0.1·(floor(L) + 1) / L.
     expected = [
-        0.1 * (np.floor(L) + 1) / L for L in r["rpe_lengths"] for first in range(60) if first + np.floor(L) + 1 < 60
+        0.1 * (np.floor(L) + 1) / L for L in r["segment_lengths"] for first in range(60) if first + np.floor(L) + 1 < 60
     ]
-    assert r["rpe_n_segments"] == len(expected)
-    assert r["rpe_trans"] == pytest.approx(100 * np.mean(expected))
-    assert r["rpe_rot"] == pytest.approx(0.0, abs=1e-9)
+    assert r["n_segments"] == len(expected)
+    assert r["t_err"] == pytest.approx(100 * np.mean(expected))
+    assert r["r_err"] == pytest.approx(0.0, abs=1e-9)
+
+
+LENGTHS = (100, 200, 300, 400, 500, 600, 700, 800)
+
+
+def _straight(n: int, step: float, yaw: float = 0.0) -> np.ndarray:
+    """(n, 4, 4) poses driving ``step`` m a frame along the camera's z, turning by ``yaw`` rad a frame."""
+    return global_from_relative(np.stack([_pose(_rotation([0, 1, 0], yaw), [0, 0, -step])] * (n - 1)))
+
+
+def _devkit_reference(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, int]:
+    """t_err (%), r_err (°/100 m) and segment count written loop by loop from the devkit's definition."""
+    dist = np.zeros(len(gt))
+    for k in range(1, len(gt)):
+        dist[k] = dist[k - 1] + np.linalg.norm(gt[k, :3, 3] - gt[k - 1, :3, 3])
+    t_errs, r_errs = [], []
+    for first in range(0, len(gt), 10):
+        for L in LENGTHS:
+            beyond = np.nonzero(dist > dist[first] + L)[0]
+            if beyond.size == 0:
+                continue
+            last = beyond[0]
+            E = np.linalg.inv(np.linalg.inv(pred[first]) @ pred[last]) @ (np.linalg.inv(gt[first]) @ gt[last])
+            t_errs.append(np.linalg.norm(E[:3, 3]) / L)
+            r_errs.append(np.arccos(min(max((np.trace(E[:3, :3]) - 1) / 2, -1.0), 1.0)) / L)
+    return 100 * np.mean(t_errs), np.mean(r_errs) * 180 / np.pi * 100, len(t_errs)
+
+
+def test_odometry_errors_of_a_constant_scale_drift():
+    """Every metre predicted 2 % long on a 999 m straight drive: each segment ends L + 1 frames on
+    (dist > L, strictly), so its error is 0.02·(L + 1)/L, pooled over all segments of all lengths.
+    Catches ≥ for > in the segment end, per-length instead of pooled means, first frames not every
+    10th, a wrong % factor, and a 7-DoF alignment that does not absorb a uniform scale."""
+    gt = _straight(1000, 1.0)
+    pred = gt.copy()
+    pred[:, :3, 3] *= 1.02
+    expected = [0.02 * (L + 1) / L for first in range(0, 1000, 10) for L in LENGTHS if first + L + 1 < 1000]
+    r = odometry_errors(pred, gt, "6dof")
+    assert r["t_err"] == pytest.approx(100 * np.mean(expected), rel=1e-9)
+    assert r["n_segments"] == len(expected) and r["devkit_lengths"]
+    assert r["r_err"] == pytest.approx(0.0, abs=1e-9)
+    aligned = odometry_errors(pred, gt, "7dof")
+    assert aligned["t_err"] == pytest.approx(0.0, abs=1e-9) and aligned["alignment_scale"] == pytest.approx(1 / 1.02)
+
+
+def test_odometry_errors_of_a_pure_yaw_bias():
+    """GT drives 0.9 m a frame straight; the prediction also turns 1e-4 rad a frame. A segment of
+    length L spans n = floor(L/0.9) + 1 frames, so its rotation error is n·1e-4/L; r_err is their mean
+    in °/100 m. Catches a wrong °/100 m factor and per-length instead of pooled means."""
+    gt, pred = _straight(1000, 0.9), _straight(1000, 0.9, yaw=1e-4)
+    spans = {L: int(np.floor(L / 0.9)) + 1 for L in LENGTHS}
+    expected = [spans[L] * 1e-4 / L for first in range(0, 1000, 10) for L in LENGTHS if first + spans[L] < 1000]
+    r = odometry_errors(pred, gt, "6dof")
+    assert r["r_err"] == pytest.approx(np.degrees(np.mean(expected)) * 100, rel=1e-9)
+    assert r["n_segments"] == len(expected)
+
+
+@pytest.mark.parametrize("sequence", ["04", "09"])
+def test_odometry_errors_equal_the_devkit_definition_on_kitti(kitti_dir, sequence):
+    """Real KITTI GT against a copy that drifts in scale and heading, with noise, 0.3× the scale: equal to
+    the loop-by-loop reference to 1e-6 after SE(3) and after Sim(3) alignment (SE(3) is skipped in the
+    code: it changes no relative motion). Catches SE(3) and Sim(3) swapped, a missing clamp of the angle (NaN on GT against itself) and any
+    slip in the segment bookkeeping on a real, curving, irregularly sampled path."""
+    gt = read_kitti_poses(kitti_dir / "odometry" / "poses" / f"{sequence}.txt")
+    rng = np.random.default_rng(0)
+    steps = relative_from_global(gt)
+    steps[:, :3, 3] *= 0.3 * (1 + 1e-4 * np.arange(len(steps)))[:, None]
+    steps[:, :3, 3] += 0.01 * rng.standard_normal((len(steps), 3))
+    steps = steps @ _pose(_rotation([0, 1, 0], 2e-4), [0, 0, 0])
+    pred = global_from_relative(steps)
+    for alignment, with_scale in (("6dof", False), ("7dof", True)):
+        r = odometry_errors(pred, gt, alignment)
+        moved = apply_sim3(pred, *umeyama(pred[:, :3, 3], gt[:, :3, 3], with_scale))
+        t_err, r_err, n = _devkit_reference(moved, gt)
+        assert (r["t_err"], r["r_err"], r["n_segments"]) == (
+            pytest.approx(t_err, abs=1e-6),
+            pytest.approx(r_err, abs=1e-6),
+            n,
+        )
+        assert r["t_err"] > 1 and r["r_err"] > 0.1  # a real error, not two zeros
+    exact = odometry_errors(gt, gt, "6dof")
+    assert exact["t_err"] == pytest.approx(0.0, abs=1e-9) and exact["r_err"] == pytest.approx(0.0, abs=1e-6)
 
 
 def test_constant_velocity_steps():

@@ -172,7 +172,9 @@ def test_two_study_processes_share_a_folder_without_redoing_or_clashing(tmp_path
 
 def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     """The committed results folder holds five seeds of baseline and cyc and other specs' variants;
-    a report of two seeds and one variant averages and pairs those alone."""
+    a report of two seeds and one variant averages and pairs those alone. Its JSONs predate t_err /
+    r_err and fill those columns from rpe_trans / rpe_rot (catches LEGACY_POSE_KEYS dropped or its
+    factor of 100 for °/m → °/100 m lost)."""
     report = tmp_path / "r.md"
     argv = ["study", "--report-only", "--spec", "study/synth_norm", "--variants", "cyc", "--seeds", "0", "1"]
     assert (
@@ -183,6 +185,7 @@ def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     assert "| untrained | 2 |" in text and "| baseline | 2 |" in text and "| cyc | 2 |" in text
     assert "| mean σ/μ | cyc | 2 |" in text and "| renderer_depth | 1 |" in text
     assert "cyc_temporal" not in text and "| id |" not in text
+    assert "| t_err (%) | r_err (°/100 m) |" in text and "| 163.95 ± 48.79 | 4.98 ± 0.41 |" in text  # untrained, 06
 
 
 def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp_path):

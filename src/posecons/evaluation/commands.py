@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import device_name, non_negative_int, output_file, output_folder, positive_int
+from ..cli import device_name, non_negative_int, output_file, output_folder, positive_float, positive_int
 from ..errors import PoseconsError
 from ..fileio import atomic_write, write_json, write_text
 
@@ -42,10 +42,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--scaling", choices=depth.SCALINGS, default="frame", help="median scaling per frame, per sequence, or none"
     )
     p.add_argument(
+        "--scale-factor",
+        type=positive_float,
+        metavar="F",
+        help="with --scaling none: multiply every depth by F (Monodepth2's 5.4 for stereo-trained models)",
+    )
+    p.add_argument(
         "--gt-kind",
         choices=tuple(depth.CROP_FOR_GT_KIND),
-        default="lidar",
-        help="lidar: Garg crop, 1e-3 < gt < 80 m; improved: gt > 0, no crop",
+        help="lidar (default): Garg crop, 1e-3 < gt < 80 m; improved (default with --eigen-to-benchmark): "
+        "gt > 0, no crop",
+    )
+    p.add_argument(
+        "--eigen-to-benchmark",
+        action="store_true",
+        help="--pred-disps holds the Eigen test split's frames: score those of the GT's lines "
+        "(eigen_benchmark) against the improved ground truth",
     )
     p.add_argument("--post-process", action="store_true", help="average with the flipped image's prediction")
     p.add_argument("--save-disps", type=output_file, metavar="OUT.npy", help="save the model's disparities")
@@ -56,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser(
         "evaluate-pose",
-        help="snippet ATE, full ATE / RPE and a constant-velocity baseline",
+        help="snippet ATE, full ATE, KITTI t_err / r_err and a constant-velocity baseline",
         description="Evaluate predicted ego-motion against KITTI odometry poses.",
     )
     src = p.add_mutually_exclusive_group(required=True)
@@ -71,6 +83,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=pose.CONST_VELOCITY_MODES,
         default="first",
         help="baseline: repeat the first GT step, or the previous GT step",
+    )
+    p.add_argument(
+        "--align",
+        choices=pose.ALIGNMENTS,
+        default="7dof",
+        help="alignment before t_err / r_err: Sim(3) (monocular) or SE(3) (metric: the devkit's own numbers)",
     )
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
@@ -128,6 +146,16 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
 
     if args.checkpoint is None and args.gt is None:
         raise PoseconsError("--pred-disps needs --gt (an exported ground-truth .npz)")
+    if args.scale_factor is not None and args.scaling != "none":
+        raise PoseconsError("--scale-factor needs --scaling none (it replaces median scaling)")
+    if args.eigen_to_benchmark and args.checkpoint is not None:
+        raise PoseconsError(
+            "--eigen-to-benchmark picks from saved Eigen predictions (--pred-disps); with --checkpoint "
+            "pass --split-file eigen_benchmark/test_files.txt --gt-kind improved"
+        )
+    if args.eigen_to_benchmark and args.gt_kind == "lidar":
+        raise PoseconsError("--eigen-to-benchmark scores against the improved ground truth, not --gt-kind lidar")
+    gt_kind = args.gt_kind or ("improved" if args.eigen_to_benchmark else "lidar")
     if args.checkpoint is not None:
         _require(args, "data_path", "split_file")
     with tempfile.TemporaryDirectory() as tmp:
@@ -148,16 +176,24 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
             atomic_write(args.save_disps, lambda tmp: np.save(tmp, disps))
     else:
         disps, pred_name = evaluate.load_pred_disps(args.pred_disps), str(args.pred_disps)
+        if args.eigen_to_benchmark:
+            disps = evaluate.eigen_to_benchmark(disps, split, pred_name)
 
-    result = evaluate.depth_result(disps, gts, split, args.scaling, args.gt_kind, pred_name, str(gt_path))
+    result = evaluate.depth_result(
+        disps, gts, split, args.scaling, gt_kind, pred_name, str(gt_path), args.scale_factor or 1.0
+    )
     if args.checkpoint is not None:
         result.update(checkpoint=describe_checkpoint(args.checkpoint))
     result.update(
-        ground_truth=str(args.gt or "exported on the fly"), post_process=bool(args.checkpoint and args.post_process)
+        ground_truth=str(args.gt or "exported on the fly"),
+        post_process=bool(args.checkpoint and args.post_process),
+        eigen_to_benchmark=args.eigen_to_benchmark,
     )
     print(compare.markdown_table([result], [Path(pred_name).stem], bold=False), end="")
     print(
-        f"{result['n_frames']} frames, scaling {result['scaling']}, {result['n_skipped']} skipped (no valid GT); "
+        f"{result['n_frames']} frames, scaling {result['scaling']}"
+        + (f" × {result['scale_factor']:g}" if result["scale_factor"] != 1 else "")
+        + f", {result['n_skipped']} skipped (no valid GT); "
         f"scales: median {result['scale_median']:.3f}, std/median {result['scale_std_over_median']:.3f}, "
         f"σ/μ pooled {result['scale_cv_pooled']:.3f}"
     )
@@ -195,15 +231,16 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
         checkpoint = None
 
-    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses))
+    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")
     for name, r in (("prediction", result), (f"const. velocity ({args.const_velocity})", result["const_velocity"])):
         print(
             f"{name:>26}: snippet ATE {r['ate_mean']:.4f} ± {r['ate_std']:.4f} ({r['n_snippets']} snippets) | "
-            f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | RPE {r['rpe_trans']:.2f} % {r['rpe_rot']:.4f} deg/m"
+            f"full ATE (Sim3) {r['ate_full_rmse']:.3f} m | t_err {r['t_err']:.2f} % r_err {r['r_err']:.2f} °/100 m"
         )
+    print(f"t_err / r_err: {evaluate.segments_note(result)}")
     if args.json:
         write_json(args.json, result)
     if args.out_dir:

@@ -13,7 +13,7 @@ import numpy as np
 from ..data.gt import load_gt
 from ..data.kitti_odometry import list_sequence_frames
 from ..data.kitti_raw import split_image_paths
-from ..data.splits import SplitLine, SplitSource
+from ..data.splits import SplitLine, SplitSource, read_split
 from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
@@ -60,6 +60,7 @@ def depth_result(
     gt_kind: str = "lidar",
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
+    scale_factor: float = 1.0,
 ) -> dict:
     """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
     N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
@@ -72,9 +73,23 @@ def depth_result(
         crop=CROP_FOR_GT_KIND[gt_kind],
         pred_name=pred_name,
         gt_name=gt_name,
+        scale_factor=scale_factor,
     )
     result.update(gt_kind=gt_kind, predictions=pred_name, skipped_lines=[str(lines[i]) for i in result["skipped"]])
     return result
+
+
+def eigen_to_benchmark(disps: np.ndarray, lines: Sequence[SplitLine], pred_name: str = "predictions") -> np.ndarray:
+    """The disparities of the bundled Eigen test split (all its frames, in its order) that belong to
+    ``lines``, in their order — the 652 eigen_benchmark frames, scored against the improved ground
+    truth, as Monodepth2's ``--eval_eigen_to_benchmark``."""
+    eigen = {str(line): i for i, line in enumerate(read_split("eigen"))}
+    if len(disps) != len(eigen):
+        raise PoseconsError(f"{pred_name} has {len(disps)} frames, not the {len(eigen)} of the Eigen test split")
+    for line in lines:
+        if str(line) not in eigen:
+            raise PoseconsError(f"{line.where}: '{line}' is not a frame of the Eigen test split")
+    return disps[[eigen[str(line)] for line in lines]]
 
 
 def pose_result(
@@ -83,11 +98,24 @@ def pose_result(
     const_velocity: str = "first",
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
+    alignment: str = "7dof",
 ) -> dict:
     """:func:`~posecons.metrics.pose.evaluate_pose` of (N, 4, 4) camera → world poses, with provenance."""
-    result = evaluate_pose(estimate, gt, const_velocity)
+    result = evaluate_pose(estimate, gt, const_velocity, alignment)
     result.update(predictions=pred_name, ground_truth=gt_name)
     return result
+
+
+def segments_note(result: dict) -> str:
+    """How a pose result's t_err / r_err were measured, in words: alignment, segment count and lengths."""
+    lengths = result["segment_lengths"]
+    if not lengths:
+        return f"{result['alignment']} alignment, no segment (the ground truth never moves)"
+    kind = "the devkit's" if result["devkit_lengths"] else "10–80 % of a path under 100 m, not the devkit's"
+    return (
+        f"{result['alignment']} alignment, {result['n_segments']} segments of "
+        f"{lengths[0]:.4g}–{lengths[-1]:.4g} m ({kind} lengths)"
+    )
 
 
 def checkpoint_depth(
@@ -101,7 +129,7 @@ def checkpoint_depth(
 
 
 def checkpoint_pose(checkpoint: Path, odometry: Path, sequence: str, out_dir: Path | None = None) -> dict:
-    """:func:`pose_result` (snippet ATE, full ATE / RPE, constant-velocity baseline) of a checkpoint's
+    """:func:`pose_result` (snippet ATE, full ATE, t_err / r_err, constant-velocity baseline) of a checkpoint's
     chained steps on odometry ``sequence`` (ground truth ``odometry/poses/<NN>.txt``); with ``out_dir``
     also its trajectory files and top view (:func:`write_trajectories`)."""
     gt_file = Path(odometry) / "poses" / f"{int(sequence):02d}.txt"

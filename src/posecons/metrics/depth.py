@@ -180,11 +180,12 @@ def scale_vs_scene_depth(scales: Sequence[float], scene_depths: Sequence[float],
     return {"slope": float(slope), "corr": float(corr), "scale_cv_rest": float(rest_cv), "jitter": float(jitter)}
 
 
-def scale_factors(scales: np.ndarray, sequences: Sequence[str], scaling: str) -> np.ndarray:
-    """(N,) factors that multiply each frame's predicted depth, from the (N,) frame scales (NaN = skipped)."""
+def scale_factors(scales: np.ndarray, sequences: Sequence[str], scaling: str, fixed: float = 1.0) -> np.ndarray:
+    """(N,) factors that multiply each frame's predicted depth, from the (N,) frame scales (NaN = skipped);
+    ``none`` gives ``fixed`` for every frame."""
     if scaling == "frame":
         return np.asarray(scales, dtype=np.float64)
-    factors = np.ones(len(scales))
+    factors = np.full(len(scales), fixed)
     if scaling == "sequence":
         names = np.asarray(sequences)
         for name in dict.fromkeys(sequences):
@@ -202,12 +203,14 @@ def evaluate_depth(
     crop: str = "garg",
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
+    scale_factor: float = 1.0,
 ) -> dict:
     """Evaluate N predicted disparities against N GT depth maps (split order).
 
     pred_disps: (N, h, w) scaled disparities; gt_depths: N arrays (H_i, W_i) in metres (0 = none);
     sequences: N sequence names (the split line's folder). ``scaling`` is ``frame``, ``sequence``
-    (one factor per sequence: the median of its frame scales) or ``none``; ``crop`` is ``garg`` or
+    (one factor per sequence: the median of its frame scales) or ``none``, which multiplies every
+    depth by ``scale_factor`` instead (Monodepth2's 5.4 for stereo-trained models); ``crop`` is ``garg`` or
     ``none`` (see :func:`valid_mask`). Frames without valid GT pixels are skipped and listed.
     ``pred_name``/``gt_name`` name the inputs in error messages (e.g. file paths).
 
@@ -219,6 +222,8 @@ def evaluate_depth(
         raise PoseconsError(f"unknown scaling {scaling!r}; expected one of {SCALINGS}")
     if crop not in CROPS:
         raise PoseconsError(f"unknown crop {crop!r}; expected one of {CROPS}")
+    if not (np.isfinite(scale_factor) and scale_factor > 0) or (scale_factor != 1.0 and scaling != "none"):
+        raise PoseconsError(f"scale factor {scale_factor} needs scaling 'none' (not {scaling!r}) and must be > 0")
     disps = check_disparities(pred_disps, pred_name)
     if not (len(disps) == len(gt_depths) == len(sequences)):
         raise PoseconsError(
@@ -243,7 +248,7 @@ def evaluate_depth(
 
     # Pass 2: apply the chosen scaling, clamp, and compute the per-frame metrics.
     sequences = list(sequences)
-    factors = scale_factors(scales, sequences, scaling)
+    factors = scale_factors(scales, sequences, scaling, scale_factor)
     per_frame = {}
     for i in evaluated:
         gt, pred = valid_pairs[i]
@@ -251,7 +256,7 @@ def evaluate_depth(
         per_frame[int(i)] = compute_depth_metrics(gt, pred)
 
     result: dict = {k: float(np.mean([m[k] for m in per_frame.values()])) for k in METRIC_NAMES}
-    result.update(scaling=scaling, crop=crop, n_frames=int(evaluated.size))
+    result.update(scaling=scaling, scale_factor=scale_factor, crop=crop, n_frames=int(evaluated.size))
     result.update(scale_consistency(scales, sequences))
     for name, stats in result["per_sequence"].items():
         stats["abs_rel"] = float(np.mean([m["abs_rel"] for i, m in per_frame.items() if sequences[i] == name]))

@@ -1,5 +1,5 @@
 """Ego-motion maths: rigid transforms and quaternions in numpy, Umeyama alignment, the standard
-5-frame snippet ATE (SPEC §10) and full-trajectory ATE / RPE.
+5-frame snippet ATE (SPEC §10), the full-trajectory ATE and the KITTI odometry devkit's t_err / r_err.
 
 Conventions: global poses G are camera → world (KITTI pose files); the relative pose of step i is
 T_i = T_{i+1←i} = inv(G_{i+1}) · G_i, the same transform the pose net returns for the ordered pair
@@ -8,12 +8,16 @@ T_i = T_{i+1←i} = inv(G_{i+1}) · G_i, the same transform the pose net returns
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from ..errors import PoseconsError
 
 SNIPPET_LENGTH = 5  # frames per snippet in the published protocol (4 relative poses)
-KITTI_RPE_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)  # metres
+KITTI_SEGMENT_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)  # metres, the odometry devkit's
+KITTI_FIRST_FRAME_STEP = 10  # the devkit starts a segment at every 10th frame (one a second at 10 Hz)
+ALIGNMENTS = ("7dof", "6dof")  # of the prediction to GT before t_err / r_err, as VO papers name them
 CONST_VELOCITY_MODES = ("first", "previous")
 
 
@@ -158,41 +162,70 @@ def ate_rmse(pred_aligned: np.ndarray, gt: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((pred_aligned[:, :3, 3] - gt[:, :3, 3]) ** 2, axis=1))))
 
 
-def rpe_lengths(path_length: float) -> tuple[list[float], int]:
-    """Segment lengths (m) and first-frame step for RPE on a trajectory of this path length.
+def segment_lengths(path_length: float) -> tuple[list[float], int]:
+    """Segment lengths (m) and first-frame step of the odometry errors on a path of this length.
 
-    KITTI's 100 … 800 m (those shorter than the path) every 10th frame; a path under 100 m
-    (short synthetic sequences) uses 10 %, 20 %, … 80 % of its length from every frame instead.
+    The devkit's 100 … 800 m (those shorter than the path) every 10th frame; a path under 100 m
+    (short synthetic sequences), where the devkit has no segment at all, uses 10 %, 20 %, … 80 %
+    of its length from every frame instead.
     """
-    if path_length >= KITTI_RPE_LENGTHS[0]:
-        return [L for L in KITTI_RPE_LENGTHS if L < path_length], 10
+    if path_length >= KITTI_SEGMENT_LENGTHS[0]:
+        return [L for L in KITTI_SEGMENT_LENGTHS if L < path_length], KITTI_FIRST_FRAME_STEP
     return [path_length * k / 10 for k in range(1, 9)], 1
 
 
-def relative_pose_error(pred: np.ndarray, gt: np.ndarray) -> dict:
-    """KITTI-style RPE of (N, 4, 4) (already scale-aligned) poses against GT over fixed path lengths.
+def segment_errors(
+    pred: np.ndarray, gt: np.ndarray, lengths: Sequence[float], step: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-segment translation (m/m) and rotation (rad/m) errors, the KITTI odometry devkit's way.
 
-    For each first frame and length L, the last frame is the first one whose GT path distance
-    exceeds L; the error E = inv(ΔP)·ΔG of the two relative motions gives translation ‖t_E‖/L
-    and rotation angle(E)/L. Returns ``rpe_trans`` (%), ``rpe_rot`` (deg/m), the lengths used and
-    the segment count (NaN metrics if the GT never moves).
+    Distances are cumulative GT position steps. From every ``step``-th first frame i and for each
+    length L, the segment ends at the first frame j with dist[j] > dist[i] + L (strictly greater;
+    no such j: no segment). E = inv(inv(P_i)·P_j) · inv(G_i)·G_j; the errors are ‖t_E‖ / L and
+    arccos(clamp((tr R_E − 1)/2, −1, 1)) / L. The inverses are general 4×4 ones, as the devkit's:
+    the rotations of a pose file are orthonormal only to their printed digits, and the transpose
+    would move t_err by ~1e-3 % on KITTI.
     """
     dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1))])
-    lengths, step = rpe_lengths(float(dist[-1]))
-    trans, rot = [], []
-    for L in lengths if dist[-1] > 0 else []:
-        for first in range(0, len(gt), step):
-            last = int(np.searchsorted(dist, dist[first] + L, side="right"))
-            if last >= len(gt):
-                break
-            err = invert_rigid(invert_rigid(pred[first]) @ pred[last]) @ (invert_rigid(gt[first]) @ gt[last])
-            trans.append(np.linalg.norm(err[:3, 3]) / L)
-            rot.append(np.degrees(rotation_angle(err[:3, :3])) / L)
+    firsts = np.arange(0, len(gt), step)
+    lasts = np.searchsorted(dist, dist[firsts, None] + np.asarray(lengths, float), side="right")
+    row, col = np.nonzero(lasts < len(gt))
+    i, j, L = firsts[row], lasts[row, col], np.asarray(lengths, float)[col]
+    inv = np.linalg.inv
+    err = inv(inv(pred[i]) @ pred[j]) @ (inv(gt[i]) @ gt[j])
+    return np.linalg.norm(err[:, :3, 3], axis=1) / L, rotation_angle(err[:, :3, :3]) / L
+
+
+def odometry_errors(pred: np.ndarray, gt: np.ndarray, alignment: str = "7dof") -> dict:
+    """The KITTI odometry devkit's t_err (%) and r_err (°/100 m) of (N, 4, 4) camera → world poses.
+
+    ``7dof``: the prediction is first Sim(3)-aligned to GT on its positions (Umeyama), the usual choice
+    for monocular methods; ``6dof``: SE(3), for a prediction in metres. Only the scale of an alignment
+    matters here: a rigid change of world frame leaves every relative motion inv(P_i)·P_j as it is, so
+    6-DoF gives the devkit's own numbers (the devkit aligns nothing) and is not computed.
+    Then :func:`segment_errors` over :func:`segment_lengths`; t_err and r_err are the means over all
+    segments, every length pooled (the devkit's overall average, not a mean of per-length means).
+    ``devkit_lengths`` is False on a path under 100 m, whose fractional lengths no paper uses.
+    The devkit itself sums distances and errors in single precision; this is float64 throughout.
+    Returns also ``alignment``, ``alignment_scale``, ``segment_lengths``, ``n_segments`` (NaN
+    errors with no segment, e.g. a GT that never moves).
+    """
+    if alignment not in ALIGNMENTS:
+        raise PoseconsError(f"unknown alignment {alignment!r}; expected one of {ALIGNMENTS}")
+    scale = 1.0
+    if alignment == "7dof":
+        pred, scale = align_trajectory(pred, gt)
+    path = float(np.sum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1)))
+    lengths, step = segment_lengths(path) if path > 0 else ([], 1)
+    trans, rot = segment_errors(pred, gt, lengths, step)
     return {
-        "rpe_trans": float(100 * np.mean(trans)) if trans else float("nan"),
-        "rpe_rot": float(np.mean(rot)) if rot else float("nan"),
-        "rpe_lengths": [float(L) for L in lengths],
-        "rpe_n_segments": len(trans),
+        "t_err": float(100 * trans.mean()) if trans.size else float("nan"),
+        "r_err": float(np.degrees(rot.mean()) * 100) if rot.size else float("nan"),
+        "alignment": alignment,
+        "alignment_scale": scale,
+        "segment_lengths": [float(L) for L in lengths],
+        "devkit_lengths": path >= KITTI_SEGMENT_LENGTHS[0],
+        "n_segments": int(trans.size),
     }
 
 
@@ -206,11 +239,12 @@ def constant_velocity_steps(gt_steps: np.ndarray, mode: str = "first") -> np.nda
     raise PoseconsError(f"unknown constant-velocity mode {mode!r}; expected one of {CONST_VELOCITY_MODES}")
 
 
-def pose_metrics(pred_global: np.ndarray, gt_global: np.ndarray) -> dict:
+def pose_metrics(pred_global: np.ndarray, gt_global: np.ndarray, alignment: str = "7dof") -> dict:
     """All pose metrics of (N, 4, 4) predicted against (N, 4, 4) GT camera → world poses.
 
-    The snippet ATE uses the steps of both trajectories; full ATE and RPE use the predicted
-    trajectory after Sim(3) alignment to GT, which absorbs the unknown monocular scale.
+    The snippet ATE uses the steps of both trajectories; the full ATE the predicted trajectory after
+    Sim(3) alignment to GT, which absorbs the unknown monocular scale; t_err / r_err
+    (:func:`odometry_errors`) the given ``alignment``.
     """
     errors = snippet_errors(relative_from_global(pred_global), relative_from_global(gt_global))
     aligned, scale = align_trajectory(pred_global, gt_global)
@@ -220,11 +254,13 @@ def pose_metrics(pred_global: np.ndarray, gt_global: np.ndarray) -> dict:
         "n_snippets": int(errors.size),
         "ate_full_rmse": ate_rmse(aligned, gt_global),
         "sim3_scale": scale,
-        **relative_pose_error(aligned, gt_global),
+        **odometry_errors(pred_global, gt_global, alignment),
     }
 
 
-def evaluate_pose(pred_global: np.ndarray, gt_global: np.ndarray, const_velocity: str = "first") -> dict:
+def evaluate_pose(
+    pred_global: np.ndarray, gt_global: np.ndarray, const_velocity: str = "first", alignment: str = "7dof"
+) -> dict:
     """:func:`pose_metrics` of (N, 4, 4) predicted camera → world poses (e.g. chained pose-net steps,
     :func:`global_from_relative`) plus the same metrics for a constant-velocity baseline
     (``const_velocity`` sub-dict), which shows how much of a score needs no images at all."""
@@ -234,7 +270,7 @@ def evaluate_pose(pred_global: np.ndarray, gt_global: np.ndarray, const_velocity
         raise PoseconsError(f"{len(pred_global)} predicted poses but {len(gt_global)} ground-truth poses")
     baseline = global_from_relative(constant_velocity_steps(relative_from_global(gt_global), const_velocity))
     return {
-        **pose_metrics(pred_global, gt_global),
+        **pose_metrics(pred_global, gt_global, alignment),
         "n_frames": len(gt_global),
-        "const_velocity": {"mode": const_velocity, **pose_metrics(baseline, gt_global)},
+        "const_velocity": {"mode": const_velocity, **pose_metrics(baseline, gt_global, alignment)},
     }

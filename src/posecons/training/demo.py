@@ -91,6 +91,8 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
         "ate_full_rmse": pose["ate_full_rmse"],
         "ate_mean_const_velocity": pose["const_velocity"]["ate_mean"],
         "ate_full_rmse_const_velocity": pose["const_velocity"]["ate_full_rmse"],
+        "t_err": pose["t_err"],
+        "r_err": pose["r_err"],
         "checkpoint": weights,
         "train_minutes": train_minutes,
         "precision": trained["precision"],
@@ -139,12 +141,13 @@ Per-frame scales median(gt)/median(pred): σ/μ per sequence averaged = {depth["
 
 ## Ego-motion (odometry sequence {seq})
 
-| | 5-frame snippet ATE | full ATE (Sim(3)) | RPE trans % | RPE rot deg/m |
+| | 5-frame snippet ATE | full ATE (Sim(3)) | t_err % | r_err °/100 m |
 |---|---|---|---|---|
-| pose net | {pose["ate_mean"]:.4f} ± {pose["ate_std"]:.4f} | {pose["ate_full_rmse"]:.3f} | {pose["rpe_trans"]:.2f} | {pose["rpe_rot"]:.4f} |
-| constant velocity (no images) | {cv["ate_mean"]:.4f} ± {cv["ate_std"]:.4f} | {cv["ate_full_rmse"]:.3f} | {cv["rpe_trans"]:.2f} | {cv["rpe_rot"]:.4f} |
+| pose net | {pose["ate_mean"]:.4f} ± {pose["ate_std"]:.4f} | {pose["ate_full_rmse"]:.3f} | {pose["t_err"]:.2f} | {pose["r_err"]:.2f} |
+| constant velocity (no images) | {cv["ate_mean"]:.4f} ± {cv["ate_std"]:.4f} | {cv["ate_full_rmse"]:.3f} | {cv["t_err"]:.2f} | {cv["r_err"]:.2f} |
 
 The snippet ATE is nearly blind on smooth driving: compare it with the constant-velocity row.
+t_err / r_err: the KITTI odometry devkit's errors, {evaluate.segments_note(pose)}.
 
 ![trajectory](plots/trajectory.png)
 
