@@ -12,6 +12,7 @@ import torch
 from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main
 from posecons.config import load_config
+from posecons.errors import PoseconsError
 from posecons.model import PoseConsModel
 from posecons.monodepth2 import FILES, POSE_OUT, monodepth2_name
 
@@ -129,6 +130,21 @@ def test_a_stereo_model_imports_its_depth_network_and_says_so(tmp_path, capsys):
     assert all(torch.equal(a, b) for a, b in zip(outputs(model, images)[:4], outputs(imported, images)[:4]))
     a, b = (load_checkpoint(tmp_path / f)["model"] for f in ("a.pt", "b.pt"))
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_monodepth2_folder_is_a_start_for_training(tmp_path):
+    """``train --init-from FOLDER``. Catches: a folder not read as a Monodepth2 model, its
+    architecture not compared with the run's."""
+    from posecons.training.trainer import initial_model
+
+    model = random_model()
+    to_monodepth2(model, tmp_path / "md2")
+    run = ["model.num_layers=10", "model.pretrained=false", "model.height=128", "model.width=416"]
+    start = initial_model(load_config(overrides=[*run, f"train.init_from={tmp_path / 'md2'}"]))
+    assert all(torch.equal(v, start.state_dict()[k]) for k, v in model.state_dict().items())
+    assert start.initialisation == f"weights of Monodepth2 {tmp_path / 'md2'} (ResNet-10, mono, 192×64)"
+    with pytest.raises(PoseconsError, match="model.num_layers 10 \\(the run: 18\\)"):
+        initial_model(load_config(overrides=[*run, "model.num_layers=18", f"train.init_from={tmp_path / 'md2'}"]))
 
 
 def test_files_without_batchnorm_counters_import(tmp_path):

@@ -73,11 +73,12 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
     config, weights, _ = read_weights(path, map_location)
     config.model.pretrained = False  # the weights come from the file
     model = PoseConsModel(config)
-    _load_state(model, weights, path)
+    load_state_into(model, weights, path)
     return model.to(map_location).eval(), config
 
 
-def _load_state(model, weights: dict, path: Path) -> None:
+def load_state_into(model, weights: dict, path: Path) -> None:
+    """``model.load_state_dict(weights)``; weights of another shape are one error line naming ``path``."""
     try:
         model.load_state_dict(weights)
     except RuntimeError as exc:

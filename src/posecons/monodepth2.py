@@ -27,8 +27,10 @@ from pathlib import Path
 
 import torch
 
+from .checkpoint import load_weights_file, save_checkpoint
 from .config import Config
 from .errors import PoseconsError
+from .model import PoseConsModel
 
 FILES = ("encoder", "depth", "pose_encoder", "pose")
 EXTRAS = ("height", "width", "use_stereo")  # encoder.pth's entries that are no weights
@@ -57,9 +59,6 @@ def read_monodepth2(folder: str | Path, map_location: str = "cpu") -> tuple[Conf
     from in words). Every file is read with ``weights_only``; a missing file, a missing, unexpected or
     misshapen tensor raises a one-line PoseconsError naming the file. A stereo-only model (no pose
     files) gives its depth network and an untrained pose network, which the description says."""
-    from .checkpoint import load_weights_file
-    from .model import PoseConsModel
-
     folder = Path(folder)
     if not folder.is_dir():
         raise PoseconsError(f"{folder}: not a Monodepth2 model folder (encoder.pth, depth.pth, …)")
@@ -128,8 +127,6 @@ def read_monodepth2(folder: str | Path, map_location: str = "cpu") -> tuple[Conf
 def import_monodepth2(folder: str | Path, out: str | Path) -> str:
     """Write a Monodepth2 model folder as the posecons checkpoint ``out`` (atomically, after every
     check); returns where its weights came from, in words."""
-    from .checkpoint import save_checkpoint
-
     config, state, origin = read_monodepth2(folder)
     save_checkpoint(out, {"config": config.to_dict(), "model": state, "initialisation": f"imported: {origin}"})
     return origin
