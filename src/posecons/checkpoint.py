@@ -30,10 +30,18 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     path = Path(path)
     if not path.is_file():
         raise PoseconsError(f"checkpoint {path} does not exist")
+    state = load_weights_file(path, map_location)
+    if not isinstance(state, dict) or "config" not in state or "model" not in state:
+        raise PoseconsError(f"{path}: not a posecons checkpoint (no 'config' and 'model' entries)")
+    return state
+
+
+def load_weights_file(path: Path, map_location: str | torch.device = "cpu") -> Any:
+    """``torch.load(weights_only=True)`` of an existing file, with one-line errors for unsafe or damaged files."""
     try:
         with warnings.catch_warnings():  # torch warns about pickle protocols before refusing a file
             warnings.simplefilter("ignore", UserWarning)
-            state = torch.load(path, map_location=map_location, weights_only=True)
+            return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
         unsafe = [line.strip() for line in str(exc).splitlines() if "GLOBAL" in line]  # a blocked import
         if unsafe:
@@ -46,31 +54,38 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
         raise PoseconsError(
             f"{path}: not a readable checkpoint (damaged, or not written by torch.save: {type(exc).__name__})"
         ) from exc
-    if not isinstance(state, dict) or "config" not in state or "model" not in state:
-        raise PoseconsError(f"{path}: not a posecons checkpoint (no 'config' and 'model' entries)")
-    return state
+
+
+def read_weights(path: str | Path, map_location: str | torch.device = "cpu") -> tuple[Config, dict, dict]:
+    """Checkpoint (``.pt``) or exported weights (``.safetensors``) → (config, model state dict, the
+    checkpoint's other entries: empty for safetensors)."""
+    path = Path(path)
+    if path.suffix == ".safetensors":
+        return *_read_safetensors(path, map_location), {}
+    state = load_checkpoint(path, map_location)
+    return _config(state["config"], path), state["model"], state
 
 
 def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
     """Checkpoint (``.pt``) or exported weights (``.safetensors``) → (PoseConsModel in eval mode, Config)."""
     from .model import PoseConsModel
 
-    path = Path(path)
-    if path.suffix == ".safetensors":
-        config, weights = _read_safetensors(path, map_location)
-    else:
-        state = load_checkpoint(path, map_location)
-        config, weights = _config(state["config"], path), state["model"]
+    config, weights, _ = read_weights(path, map_location)
     config.model.pretrained = False  # the weights come from the file
     model = PoseConsModel(config)
+    load_state_into(model, weights, path)
+    return model.to(map_location).eval(), config
+
+
+def load_state_into(model, weights: dict, path: Path) -> None:
+    """``model.load_state_dict(weights)``; weights of another shape are one error line naming ``path``."""
     try:
         model.load_state_dict(weights)
     except RuntimeError as exc:
         raise PoseconsError(
             f"{path}: weights do not fit the architecture in its config "
-            f"(ResNet-{config.model.num_layers}): {str(exc).splitlines()[0]}"
+            f"(ResNet-{model.config.model.num_layers}): {str(exc).splitlines()[0]}"
         ) from exc
-    return model.to(map_location).eval(), config
 
 
 def describe_checkpoint(path: str | Path) -> dict[str, Any]:

@@ -160,6 +160,10 @@ class TrainConfig:
     # EMA of the weights and BatchNorm buffers after every optimiser step, ema ← d·ema + (1 − d)·w, for
     # validation, best.pt and the final weights (last.pt also keeps the raw ones); 0: off
     ema_decay: float = 0.0
+    # Start from the weights, and only the weights, of a posecons checkpoint (.pt, .safetensors) or a Monodepth2
+    # model folder of the run's architecture (model.num_layers, scales, pose_mirror): fine-tuning, with a new
+    # optimiser, schedule and step count, instead of model.pretrained's initialisation; null: none
+    init_from: Optional[str] = None
 
 
 @dataclass

@@ -1,4 +1,5 @@
-"""`posecons predict` and `posecons export`: thin wrappers over :mod:`.predict` and :mod:`.export`."""
+"""`posecons predict`, `posecons export` and `posecons import-monodepth2`: thin wrappers over
+:mod:`.predict`, :mod:`.export` and :mod:`posecons.monodepth2`."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import device_name, non_negative_float, output_folder, positive_float, positive_int
+from ..cli import device_name, non_negative_float, output_file, output_folder, positive_float, positive_int
 from .io import DEFAULT_FPS
 
 
@@ -72,6 +73,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     e.set_defaults(func=export_command)
 
+    m = subparsers.add_parser(
+        "import-monodepth2",
+        help="a Monodepth2 model folder → a posecons checkpoint (same networks, same outputs)",
+        description="Read a Monodepth2 model folder (encoder.pth, depth.pth, and pose_encoder.pth + pose.pth "
+        "of a mono or mono+stereo model) into a posecons checkpoint for evaluate-depth, evaluate-pose, "
+        "predict, export or train --init-from. A stereo-only model gives its depth network only.",
+    )
+    m.add_argument("folder", type=Path, help="Monodepth2 model folder, e.g. models/mono_640x192")
+    m.add_argument("--out", required=True, type=output_file, help="checkpoint to write (.pt)")
+    m.set_defaults(func=import_monodepth2_command)
+
 
 def predict_command(args: argparse.Namespace) -> int:
     from . import (  # the package's lazy names (not the submodule)
@@ -107,4 +119,11 @@ def export_command(args: argparse.Namespace) -> int:
     info = export_model(args.checkpoint, args.out, tolerance=args.tolerance)
     print(json.dumps(info["max_abs_diff"], indent=2))
     print(f"exported to {args.out} (max |ONNX − PyTorch| within {args.tolerance:g})")
+    return 0
+
+
+def import_monodepth2_command(args: argparse.Namespace) -> int:
+    from ..monodepth2 import import_monodepth2
+
+    print(f"imported {import_monodepth2(args.folder, args.out)} → {args.out}")  # says when only depth is
     return 0

@@ -29,6 +29,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_overrides(p, "override a config value, e.g. --set loss.constraints=[cyc]")
     p.add_argument("--resume", action="store_true", help="continue RUN/checkpoints/last.pt exactly")
+    p.add_argument(
+        "--init-from",
+        metavar="CKPT",
+        help="start from these weights only (a .pt or .safetensors checkpoint, or a Monodepth2 model folder, "
+        "of the run's architecture) with a new optimiser, schedule and step count: fine-tuning (train.init_from)",
+    )
     p.add_argument("--devices", type=positive_int, default=1, help="processes (one GPU each) per node")
     p.add_argument("--nodes", type=positive_int, default=1, help="machines taking part; each runs this command")
     p.add_argument("--rdzv-endpoint", help="HOST:PORT of the rendezvous for --nodes > 1")
@@ -61,13 +67,21 @@ def _config(args: argparse.Namespace):
         overrides.append(f"train.max_steps={args.max_steps}")
     if args.precision:
         overrides.append(f"train.precision='{args.precision}'")
+    if args.init_from is not None:
+        if args.resume:
+            raise PoseconsError("--init-from starts a new run; --resume continues one from its own last.pt")
+        if not Path(args.init_from).exists():
+            raise PoseconsError(f"--init-from {args.init_from}: no such checkpoint or folder")
     path = resolve_preset(args.config) if args.config else None
     if path is None:
         run_config = Path(args.out) / "config.yaml"
         if not (args.resume and run_config.is_file()):
             raise PoseconsError("--config is required (except with --resume of an existing run)")
         path = run_config
-    return load_config(path, overrides)
+    config = load_config(path, overrides)
+    if args.init_from is not None:  # set here, not through --set: a path need not be valid YAML
+        config.train.init_from = str(args.init_from)
+    return config
 
 
 def _launch_torchrun(args: argparse.Namespace) -> int:

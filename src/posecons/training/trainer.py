@@ -55,6 +55,7 @@ from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
 from ..fileio import remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
+from .init_from import load_initial_weights
 from .validation import Validator
 
 
@@ -630,11 +631,16 @@ def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
     """The network a run of ``config`` starts from. The RNGs are seeded with ``seed`` (default
     ``train.seed``) right before it is built, so nothing set up earlier (data, validation, a
     variant's options) can shift the initial weights: every variant of a study with the same seed
-    starts from the same weights, and training continues the RNG streams from here."""
+    starts from the same weights, and training continues the RNG streams from here. With
+    ``train.init_from`` the weights are that file's."""
     seed = config.train.seed if seed is None else seed
     random.seed(seed)
     torch.manual_seed(seed)
-    return PoseConsModel(config)
+    if config.train.init_from is None:
+        return PoseConsModel(config)
+    model = PoseConsModel(_without_imagenet(config))  # the weights come from train.init_from
+    model.initialisation = load_initial_weights(model, config.train.init_from)
+    return model
 
 
 def save_initial_weights(path: str | Path, config: Config) -> None:
@@ -658,12 +664,14 @@ def describe_selection(best_metric: str) -> str:
 
 
 def _without_imagenet(config):
-    """A copy of a Config (or its dict) that builds the networks without fetching ImageNet weights."""
+    """A copy of a Config (or its dict) that builds the networks without fetching ImageNet weights
+    (or, a Config, reading train.init_from)."""
     config = copy.deepcopy(config)
     if isinstance(config, dict):
         config["model"]["pretrained"] = False
     else:
         config.model.pretrained = False
+        config.train.init_from = None
     return config
 
 
