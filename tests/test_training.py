@@ -400,13 +400,21 @@ def test_two_process_ddp_ranks_agree(synth_data, tmp_path):
 # At this lr the disparity collapses to 0 within a dozen steps; its TensorBoard image must stay finite.
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 def test_short_overfit_lowers_photometric_loss(synth_data, tmp_path):
+    """40 steps on four frames lower their photometric loss, on any seed and thread count, without the
+    disparity collapsing. The recipe is the demo's (lr 3e-4 after a warm-up, a mirror-equivariant pose
+    net): measured over seeds 0–7 at one and two threads, the loss ends at 0.43–0.53 or 0.81–0.84 of the
+    untrained one, so 0.9 leaves a margin on the worse mode. The old recipe (lr 1e-3, no warm-up)
+    ended at 0.965 on seed 0 with one thread and fails here; so does a run whose optimiser never steps
+    (checked by mutation: `self.scaler.step(self.optimizer)` removed)."""
     split = tmp_path / "split"
     split.mkdir()
     lines = (synth_data / "splits" / "synth" / "train_files.txt").read_text().splitlines()[:4]
     (split / "train_files.txt").write_text("\n".join(lines) + "\n")
     (split / "val_files.txt").write_text("\n".join(lines) + "\n")
     cfg = tiny_config(
-        "train.lr=1e-3",
+        "train.lr=3e-4",
+        "train.warmup_steps=10",
+        "model.pose_mirror=true",
         "train.epochs=20",
         "train.val_every=40",
         "data.flip_prob=0",
@@ -418,7 +426,11 @@ def test_short_overfit_lowers_photometric_loss(synth_data, tmp_path):
     before = trainer.validator.run(trainer.model, 0)["val_photometric"]
     trainer.fit()
     after = json.loads((tmp_path / "run" / "metrics.jsonl").read_text().splitlines()[-1])["val_photometric"]
-    assert after < 0.85 * before, (before, after)
+    assert after < 0.9 * before, (before, after)
+    batch = next(iter(torch.utils.data.DataLoader(trainer.validator.dataset, batch_size=4)))
+    with torch.no_grad():
+        outputs, _ = trainer.model.eval()(batch)
+    assert collapse_signs(outputs)["far_fraction"] < 0.05  # a disparity pinned at the far end lowers the loss too
     # 2 steps per epoch × 20 epochs, of which only the newest two snapshots stay, as weights only
     checkpoints = tmp_path / "run" / "checkpoints"
     assert sorted(p.name for p in checkpoints.glob("epoch_*.pt")) == ["epoch_19.pt", "epoch_20.pt"]
