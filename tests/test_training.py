@@ -166,6 +166,25 @@ def test_persistent_loader_workers_draw_each_epochs_augmentation(synth_data, tmp
     assert [b["index"].tolist() for b in trainer._loader(1, 2)] == [b["index"].tolist() for b in seen[1][2:]]
 
 
+def test_validation_changes_neither_training_nor_computes_constraints(synth_data, tmp_path):
+    """The weights after 6 steps are the same with a validation every 2 steps as with none, in a run
+    whose identity fraction and constraint subset draw from torch's RNG; validation computes no
+    constraint loss. Caught mutations: ``Validator.run`` without ``torch.random.fork_rng`` (weights
+    differ); validation calling the model with ``with_constraints=True`` (constraint losses seen)."""
+    sets = ["loss.constraints=[fb,id,cyc]", "loss.identity_fraction=0.5", "loss.constraint_fraction=0.5"]
+    weights, losses = {}, {True: set(), False: set()}  # loss names by model.training
+    for every in ("off", "2"):
+        cfg = tiny_config(*sets, "train.max_steps=6", f"train.val_every={every}")
+        trainer = Trainer(cfg, synth_data, tmp_path / every, quiet=True)
+        trainer.model.register_forward_hook(lambda model, args, out: losses[model.training].update(out[1]))
+        trainer.fit()
+        weights[every] = trainer.model.state_dict()
+    assert {"fb", "id", "cyc"} <= losses[True] and losses[False] & {"fb", "id", "cyc"} == set()
+    assert (tmp_path / "2" / "metrics" / "step_000006.json").is_file()  # it did validate
+    for key, value in weights["off"].items():
+        assert torch.equal(value, weights["2"][key]), key
+
+
 def test_a_second_process_on_a_run_directory_stops_and_leaves_the_run_alone(synth_data, tmp_path):
     run = tmp_path / "run"
     train(tiny_config("train.max_steps=1", "train.val_every=0"), synth_data, run, quiet=True)
