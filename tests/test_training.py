@@ -17,6 +17,7 @@ from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
+from posecons.training import trainer as trainer_module
 from posecons.training.trainer import Trainer, collapse_signs, train
 
 pytestmark = pytest.mark.slow
@@ -195,6 +196,41 @@ def test_a_second_process_on_a_run_directory_stops_and_leaves_the_run_alone(synt
             train(more, synth_data, run, resume=True, quiet=True)
     assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files
     assert train(more, synth_data, run, resume=True, quiet=True)["steps"] == 2  # released: it resumes
+
+
+def test_a_second_train_failing_on_a_new_folder_leaves_the_first_ones_files(synth_data, tmp_path, monkeypatch):
+    """This process looks at a new run folder, then another process starts training there before this
+    one takes the lock; this one stops, and the other's files (no checkpoint yet) stay. Caught
+    mutation: deciding that the folder is new (to discard on failure) before the lock is taken."""
+    run, first, config = tmp_path / "run", [], tmp_path / "c.yaml"
+    config.write_text('train:\n  max_steps: 2\n  val_every: "off"\n')
+    sets = sum([["--set", s] for s in TINY], [])
+    command = posecons_cmd("train", "--config", str(config), "--data-path", str(synth_data), "--out", str(run))
+    command += ["--quiet", *sets]
+    real = trainer_module._writable_dir
+
+    def the_other_starts_first(out: Path):
+        if not first:
+            first.append(subprocess.Popen(command, env={**os.environ, "OMP_NUM_THREADS": "1"}))
+            while not (run / "config.yaml").is_file():
+                assert first[0].poll() is None, "the first process ended before it wrote its config"
+                time.sleep(0.05)
+        return real(out)
+
+    monkeypatch.setattr(trainer_module, "_writable_dir", the_other_starts_first)
+    with pytest.raises(PoseconsError, match="another process is training this run"):
+        train(tiny_config("train.max_steps=2", "train.val_every=off"), synth_data, run, quiet=True)
+    assert first[0].wait(timeout=300) == 0 and (run / "config.yaml").is_file() and any((run / "tb").iterdir())
+    assert load_checkpoint(run / "checkpoints" / "last.pt")["step"] == 2
+
+
+def test_the_writability_probe_leaves_another_processes_probe_alone(tmp_path):
+    """Caught mutation: the probe under a fixed name (``.write_test``), which a second process
+    overwrites and removes while the first one probes."""
+    theirs = tmp_path / ".write_test"
+    theirs.write_text("theirs")
+    trainer_module._writable_dir(tmp_path)
+    assert theirs.read_text() == "theirs" and sorted(tmp_path.iterdir()) == [theirs]
 
 
 def test_collapse_signs_count_warped_pixels_and_far_pinned_disparities():

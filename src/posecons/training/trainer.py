@@ -32,6 +32,7 @@ import random
 import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -128,17 +129,26 @@ RUN_LOCK = ".lock"
 def _hold_run_dir(out: Path):
     """Hold ``out``'s lock while a process trains there: a second process on the same run directory
     (two study sittings picking the same run, a repeated command) stops at once instead of writing
-    over the first one's checkpoints and logs."""
-    _writable_dir(out)
+    over the first one's checkpoints and logs. A folder that was new or empty when the lock was
+    taken holds only this process's files: a failure before the first checkpoint removes them."""
+    created = _writable_dir(out)
     lock = FileLock(out / RUN_LOCK, timeout=0)
     try:
         lock.acquire()
     except Timeout:
         raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
+    fresh, discard = all(p.name == RUN_LOCK for p in out.iterdir()), False
     try:
         yield
+    except BaseException:
+        discard = fresh and not (out / "checkpoints" / "last.pt").exists()
+        if discard:
+            _discard(out)
+        raise
     finally:
         lock.release()
+        if discard:
+            remove_empty(created)
 
 
 def run_in_progress(out: Path) -> bool:
@@ -152,15 +162,17 @@ def run_in_progress(out: Path) -> bool:
         return True
 
 
-def _writable_dir(out: Path) -> None:
-    """Make ``out`` if needed; an unwritable one is an error naming it."""
+def _writable_dir(out: Path) -> list[Path]:
+    """Make ``out`` if needed and return the folders made, outermost first; an unwritable one is an
+    error naming it."""
+    created = [p for p in [out, *out.parents] if not p.exists()][::-1]
     try:
         out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write_test"
-        probe.write_text("ok")
-        probe.unlink()
+        with tempfile.TemporaryFile(dir=out):  # a probe of its own: other processes may probe at once
+            pass
     except OSError as exc:
         raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
+    return created
 
 
 def _prepare_run_dir(out: Path, resume: bool) -> None:
@@ -678,16 +690,17 @@ def use_deterministic_algorithms(device: torch.device) -> None:
     torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
 
 
-def _discard(out: Path, created: list[Path]) -> None:
-    """Remove what a run that never saved a state wrote into its new or empty folder, and the folder
-    and parents this call created."""
-    if out.is_dir():
-        for entry in out.iterdir():
-            if entry.is_dir() and not entry.is_symlink():
-                shutil.rmtree(entry)
-            else:
-                entry.unlink()
-    remove_empty(created)
+def _discard(out: Path) -> None:
+    """Remove what a run that never saved a state wrote into its new or empty folder. Its lock goes
+    last, while still held: a process that starts now makes a lock of its own."""
+    for entry in out.iterdir():
+        if entry.name == RUN_LOCK:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+    (out / RUN_LOCK).unlink()
 
 
 def _as_tuple(value):
@@ -707,21 +720,14 @@ def train(
     """Train a run and return a summary (steps, minutes, last validation metrics)."""
     out = Path(out)
     main = int(os.environ.get("RANK", 0)) == 0
-    fresh = main and not (out.exists() and any(out.iterdir()))  # then everything in it is this run's
-    created = [p for p in [out, *out.parents] if not p.exists()][::-1] if fresh else []  # made by the Trainer
     stop = StopRequest()
     with stop.installed():
-        try:
-            with _hold_run_dir(out) if main else contextlib.nullcontext():
-                trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
-                trainer.stop = stop
-                summary = trainer.fit()
-                if trainer.env.main:
-                    write_json(out / "train_summary.json", summary)
-        except BaseException:
-            if fresh and not (out / "checkpoints" / "last.pt").exists():
-                _discard(out, created)
-            raise
+        with _hold_run_dir(out) if main else contextlib.nullcontext():
+            trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+            trainer.stop = stop
+            summary = trainer.fit()
+            if trainer.env.main:
+                write_json(out / "train_summary.json", summary)
     if dist.is_initialized():
         dist.barrier()
         dist.destroy_process_group()
