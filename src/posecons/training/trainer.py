@@ -19,7 +19,8 @@ resumed ends with the same weights as an uninterrupted one (in deterministic mod
 SIGINT (Ctrl-C) or SIGTERM (what schedulers send before killing a job) stops the run at the next
 step boundary: ``last.pt`` is written and :class:`~posecons.errors.Interrupted` says how to resume.
 A second signal stops at once. A run that fails or is stopped before it saved any state leaves
-nothing behind in a run folder that was new or empty.
+nothing behind in a run folder that was new or empty, but for a crash during training:
+``RUN/crash.log`` (the error, its traceback) and ``RUN/tb/`` stay, until the next attempt there.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ import sys
 import tempfile
 import threading
 import time
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -123,6 +125,8 @@ class StopRequest:
 
 
 RUN_LOCK = ".lock"
+CRASH_LOG = "crash.log"
+CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
 
 
 @contextlib.contextmanager
@@ -130,20 +134,25 @@ def _hold_run_dir(out: Path):
     """Hold ``out``'s lock while a process trains there: a second process on the same run directory
     (two study sittings picking the same run, a repeated command) stops at once instead of writing
     over the first one's checkpoints and logs. A folder that was new or empty when the lock was
-    taken holds only this process's files: a failure before the first checkpoint removes them."""
+    taken holds only this process's files: a failure before the first checkpoint removes them
+    (yields whether it was)."""
     created = _writable_dir(out)
     lock = FileLock(out / RUN_LOCK, timeout=0)
     try:
         lock.acquire()
     except Timeout:
         raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
-    fresh, discard = all(p.name == RUN_LOCK for p in out.iterdir()), False
+    left = {p.name for p in out.iterdir()} - {RUN_LOCK}
+    fresh, discard = not left or (CRASH_LOG in left and left <= set(CRASH_RECORD)), False
+    if fresh:  # this attempt replaces the crash record of an earlier one
+        _remove_all_but(out, {RUN_LOCK})
     try:
-        yield
+        yield fresh
     except BaseException:
         discard = fresh and not (out / "checkpoints" / "last.pt").exists()
-        if discard:
-            _discard(out)
+        if discard:  # a run that crashed in training keeps its record; the lock goes last, while held
+            _remove_all_but(out, {RUN_LOCK, *(CRASH_RECORD if (out / CRASH_LOG).is_file() else ())})
+            (out / RUN_LOCK).unlink()
         raise
     finally:
         lock.release()
@@ -690,17 +699,33 @@ def use_deterministic_algorithms(device: torch.device) -> None:
     torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
 
 
-def _discard(out: Path) -> None:
-    """Remove what a run that never saved a state wrote into its new or empty folder. Its lock goes
-    last, while still held: a process that starts now makes a lock of its own."""
+def _remove_all_but(out: Path, keep: set[str]) -> None:
+    """Remove the entries of a run folder whose files are all posecons's own, but those named ``keep``."""
     for entry in out.iterdir():
-        if entry.name == RUN_LOCK:
+        if entry.name in keep:
             continue
         if entry.is_dir() and not entry.is_symlink():
             shutil.rmtree(entry)
         else:
             entry.unlink()
-    (out / RUN_LOCK).unlink()
+
+
+def _write_crash_record(trainer: Trainer, exc: BaseException) -> None:
+    """``RUN/crash.log`` (the error and its traceback) beside the flushed ``RUN/tb/``: what stays of a
+    run that crashed before its first checkpoint, whose other files are removed."""
+    out = trainer.out
+    if trainer.writer:
+        trainer.writer.close()
+    error = "".join(traceback.format_exception_only(exc)).strip()
+    write_text(
+        out / CRASH_LOG,
+        f"training crashed at step {trainer.step}: {error}\n\n" + "".join(traceback.format_exception(exc)),
+    )
+    print(
+        f"{out}: the run crashed at step {trainer.step}, before its first checkpoint; the error is in "
+        f"{out / CRASH_LOG}, the TensorBoard log in {out / 'tb'}",
+        file=sys.stderr,
+    )
 
 
 def _as_tuple(value):
@@ -722,10 +747,15 @@ def train(
     main = int(os.environ.get("RANK", 0)) == 0
     stop = StopRequest()
     with stop.installed():
-        with _hold_run_dir(out) if main else contextlib.nullcontext():
+        with _hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
             trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
             trainer.stop = stop
-            summary = trainer.fit()
+            try:
+                summary = trainer.fit()
+            except Exception as exc:  # an Interrupted run stopped on purpose and needs no record
+                if fresh and not isinstance(exc, Interrupted) and not (out / "checkpoints" / "last.pt").exists():
+                    _write_crash_record(trainer, exc)
+                raise
             if trainer.env.main:
                 write_json(out / "train_summary.json", summary)
     if dist.is_initialized():
