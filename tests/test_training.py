@@ -233,6 +233,28 @@ def test_the_writability_probe_leaves_another_processes_probe_alone(tmp_path):
     assert theirs.read_text() == "theirs" and sorted(tmp_path.iterdir()) == [theirs]
 
 
+def test_resume_falls_back_to_the_previous_state_when_last_does_not_load(synth_data, tmp_path, capsys):
+    """An empty last.pt (a machine that crashed as it was written): --resume says so in one line and
+    continues from last.prev.pt, which then is last.pt again. Caught mutations: ``Trainer.save`` not
+    keeping the previous state; ``_newest_state`` without the fallback, or leaving the empty last.pt
+    (the next save would keep it as last.prev.pt)."""
+    run, sets = tmp_path / "run", ["train.val_every=off"]
+    train(tiny_config("train.max_steps=2", "train.checkpoint_every=1", *sets), synth_data, run, quiet=True)
+    last = run / "checkpoints" / "last.pt"
+    previous = load_checkpoint(run / "checkpoints" / "last.prev.pt")
+    assert 1 <= previous["step"] <= 2 and "optimizer" in previous
+    last.write_bytes(b"")
+    assert train(tiny_config("train.max_steps=3", *sets), synth_data, run, resume=True, quiet=True)["steps"] == 3
+    err = capsys.readouterr().err
+    assert f"{last}: not a readable checkpoint" in err and f"resuming from {last.with_name('last.prev.pt')}" in err
+    assert load_checkpoint(last)["step"] == 3  # one save at the end: the state it resumed from stays
+    assert load_checkpoint(last.with_name("last.prev.pt"))["step"] == previous["step"]
+    last.write_bytes(b"")
+    last.with_name("last.prev.pt").unlink()  # nothing to fall back to: the error names last.pt
+    with pytest.raises(PoseconsError, match=f"{last}: not a readable checkpoint"):
+        train(tiny_config("train.max_steps=4", *sets), synth_data, run, resume=True, quiet=True)
+
+
 def test_collapse_signs_count_warped_pixels_and_far_pinned_disparities():
     disp = torch.full((2, 1, 4, 4), 0.5)
     disp[0, 0, 0] = 0.005  # 4 of 32 pixels pinned at the far end (small sigmoid = small disparity = far)

@@ -7,6 +7,7 @@ that torchrun sets. The run directory holds everything of a run::
     RUN/config.yaml             resolved config
     RUN/checkpoints/last.pt     model, optimiser, scheduler, step, epoch, data position, RNG
                                 (with train.ema_decay > 0: "model" is the EMA, "raw_model" the trained weights)
+    RUN/checkpoints/last.prev.pt the last.pt before it: --resume falls back to it if last.pt does not load
     RUN/checkpoints/epoch_NN.pt weights (+ config, step) at each epoch end; train.keep_epochs of them
     RUN/checkpoints/best.pt     weights at the best validation abs rel (photometric loss without GT)
     RUN/tb/                     TensorBoard scalars and images
@@ -56,7 +57,7 @@ from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
-from ..fileio import remove_empty, remove_temporaries, write_json, write_text
+from ..fileio import keep_copy, remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .validation import Validator
 
@@ -125,6 +126,7 @@ class StopRequest:
 
 
 RUN_LOCK = ".lock"
+PREVIOUS = "last.prev.pt"  # the full state before last.pt
 CRASH_LOG = "crash.log"
 CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
 
@@ -269,7 +271,7 @@ class Trainer:
         if resume:
             if self.env.main:  # a checkpoint being written when the run was killed
                 remove_temporaries(self.out / "checkpoints")
-            self._load(self.out / "checkpoints" / "last.pt")
+            self._load(*self._newest_state(self.out / "checkpoints"))
         elif self.env.main:
             write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         if not self.quiet:
@@ -316,8 +318,22 @@ class Trainer:
             },
         }
 
-    def _load(self, path: Path) -> None:
-        state = load_checkpoint(path, map_location=self.device)
+    def _newest_state(self, folder: Path) -> tuple[Path, dict[str, Any]]:
+        """``last.pt`` and its state or, where it does not load (e.g. a crash of the machine as it
+        was written), the ``last.prev.pt`` it replaced, which then takes its place."""
+        last, previous = folder / "last.pt", folder / PREVIOUS
+        try:
+            return last, load_checkpoint(last, map_location=self.device)
+        except PoseconsError as exc:
+            if not previous.is_file():
+                raise
+            state = load_checkpoint(previous, map_location=self.device)
+            if self.env.main:
+                print(f"{exc}; resuming from {previous} (step {state.get('step')}) instead", file=sys.stderr)
+                keep_copy(previous, last)
+            return previous, state
+
+    def _load(self, path: Path, state: dict[str, Any]) -> None:
         missing = [
             k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng") if k not in state
         ]
@@ -358,9 +374,13 @@ class Trainer:
                 torch.cuda.set_rng_state_all([s.cpu() for s in state["rng"]["cuda"]])
 
     def save(self) -> None:
-        """The full training state, for resuming: ``checkpoints/last.pt``."""
+        """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
+        as ``last.prev.pt``, what a resume falls back to should the newest not load."""
         if self.env.main:
-            save_checkpoint(self.out / "checkpoints" / "last.pt", self.state())
+            last = self.out / "checkpoints" / "last.pt"
+            if last.is_file():
+                keep_copy(last, last.with_name(PREVIOUS))
+            save_checkpoint(last, self.state())
 
     def save_weights(self, name: str, selected_by: str | None = None) -> None:
         """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
