@@ -10,7 +10,16 @@ from pathlib import Path
 import pytest
 
 from posecons.errors import PoseconsError
-from posecons.fileio import MANIFEST, append_record, atomic_file, output_dir, remove_temporaries, write_json, write_text
+from posecons.fileio import (
+    MANIFEST,
+    append_record,
+    atomic_file,
+    keep_copy,
+    output_dir,
+    remove_temporaries,
+    write_json,
+    write_text,
+)
 
 
 @pytest.fixture
@@ -122,3 +131,34 @@ def test_append_record_drops_rows_a_resume_repeats(tmp_path: Path) -> None:
     for step in (10, 20, 30, 20, 30):  # a run killed after step 30 and resumed from step 10
         append_record(path, {"step": step, "v": step})
     assert [json.loads(line)["step"] for line in path.read_text().splitlines()] == [10, 20, 30]
+
+
+def test_atomic_file_syncs_the_file_before_the_rename_and_the_folder_after(tmp_path: Path, monkeypatch) -> None:
+    """Without both, a crash of the machine can leave the new name on an empty file. Caught
+    mutations: either ``_fsync`` call in ``atomic_file`` removed."""
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(os, "fsync", lambda fd: events.append(("fsync", os.fstat(fd).st_ino)) or real_fsync(fd))
+    monkeypatch.setattr(os, "replace", lambda a, b: events.append(("replace",)) or real_replace(a, b))
+    target = tmp_path / "new" / "last.pt"
+    write_text(target, "state")
+    assert events == [("fsync", target.stat().st_ino), ("replace",), ("fsync", target.parent.stat().st_ino)]
+
+
+def test_keep_copy_links_where_it_can_and_survives_the_replacement_of_its_source(tmp_path: Path, monkeypatch) -> None:
+    """A hard link (no copy of a large checkpoint), a copy on a filesystem without links. Caught
+    mutations: always copying (the inode check); the copy fallback removed (the second round)."""
+
+    def no_links(source, target):
+        raise OSError("this filesystem has no hard links")
+
+    source, kept = tmp_path / "last.pt", tmp_path / "last.prev.pt"
+    write_text(kept, "step 0")
+    for linked in (True, False):
+        write_text(source, "step 1")
+        keep_copy(source, kept)
+        assert (kept.stat().st_ino == source.stat().st_ino) == linked
+        write_text(source, "step 2")
+        assert kept.read_text() == "step 1" and source.read_text() == "step 2"
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["last.prev.pt", "last.pt"]
+        monkeypatch.setattr(os, "link", no_links)

@@ -17,6 +17,7 @@ from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
+from posecons.training import trainer as trainer_module
 from posecons.training.trainer import Trainer, collapse_signs, train
 
 pytestmark = pytest.mark.slow
@@ -166,6 +167,25 @@ def test_persistent_loader_workers_draw_each_epochs_augmentation(synth_data, tmp
     assert [b["index"].tolist() for b in trainer._loader(1, 2)] == [b["index"].tolist() for b in seen[1][2:]]
 
 
+def test_validation_changes_neither_training_nor_computes_constraints(synth_data, tmp_path):
+    """The weights after 6 steps are the same with a validation every 2 steps as with none, in a run
+    whose identity fraction and constraint subset draw from torch's RNG; validation computes no
+    constraint loss. Caught mutations: ``Validator.run`` without ``torch.random.fork_rng`` (weights
+    differ); validation calling the model with ``with_constraints=True`` (constraint losses seen)."""
+    sets = ["loss.constraints=[fb,id,cyc]", "loss.identity_fraction=0.5", "loss.constraint_fraction=0.5"]
+    weights, losses = {}, {True: set(), False: set()}  # loss names by model.training
+    for every in ("off", "2"):
+        cfg = tiny_config(*sets, "train.max_steps=6", f"train.val_every={every}")
+        trainer = Trainer(cfg, synth_data, tmp_path / every, quiet=True)
+        trainer.model.register_forward_hook(lambda model, args, out: losses[model.training].update(out[1]))
+        trainer.fit()
+        weights[every] = trainer.model.state_dict()
+    assert {"fb", "id", "cyc"} <= losses[True] and losses[False] & {"fb", "id", "cyc"} == set()
+    assert (tmp_path / "2" / "metrics" / "step_000006.json").is_file()  # it did validate
+    for key, value in weights["off"].items():
+        assert torch.equal(value, weights["2"][key]), key
+
+
 def test_a_second_process_on_a_run_directory_stops_and_leaves_the_run_alone(synth_data, tmp_path):
     run = tmp_path / "run"
     train(tiny_config("train.max_steps=1", "train.val_every=0"), synth_data, run, quiet=True)
@@ -176,6 +196,63 @@ def test_a_second_process_on_a_run_directory_stops_and_leaves_the_run_alone(synt
             train(more, synth_data, run, resume=True, quiet=True)
     assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == files
     assert train(more, synth_data, run, resume=True, quiet=True)["steps"] == 2  # released: it resumes
+
+
+def test_a_second_train_failing_on_a_new_folder_leaves_the_first_ones_files(synth_data, tmp_path, monkeypatch):
+    """This process looks at a new run folder, then another process starts training there before this
+    one takes the lock; this one stops, and the other's files (no checkpoint yet) stay. Caught
+    mutation: deciding that the folder is new (to discard on failure) before the lock is taken."""
+    run, first, config = tmp_path / "run", [], tmp_path / "c.yaml"
+    config.write_text('train:\n  max_steps: 2\n  val_every: "off"\n')
+    sets = sum([["--set", s] for s in TINY], [])
+    command = posecons_cmd("train", "--config", str(config), "--data-path", str(synth_data), "--out", str(run))
+    command += ["--quiet", *sets]
+    real = trainer_module._writable_dir
+
+    def the_other_starts_first(out: Path):
+        if not first:
+            first.append(subprocess.Popen(command, env={**os.environ, "OMP_NUM_THREADS": "1"}))
+            while not (run / "config.yaml").is_file():
+                assert first[0].poll() is None, "the first process ended before it wrote its config"
+                time.sleep(0.05)
+        return real(out)
+
+    monkeypatch.setattr(trainer_module, "_writable_dir", the_other_starts_first)
+    with pytest.raises(PoseconsError, match="another process is training this run"):
+        train(tiny_config("train.max_steps=2", "train.val_every=off"), synth_data, run, quiet=True)
+    assert first[0].wait(timeout=300) == 0 and (run / "config.yaml").is_file() and any((run / "tb").iterdir())
+    assert load_checkpoint(run / "checkpoints" / "last.pt")["step"] == 2
+
+
+def test_the_writability_probe_leaves_another_processes_probe_alone(tmp_path):
+    """Caught mutation: the probe under a fixed name (``.write_test``), which a second process
+    overwrites and removes while the first one probes."""
+    theirs = tmp_path / ".write_test"
+    theirs.write_text("theirs")
+    trainer_module._writable_dir(tmp_path)
+    assert theirs.read_text() == "theirs" and sorted(tmp_path.iterdir()) == [theirs]
+
+
+def test_resume_falls_back_to_the_previous_state_when_last_does_not_load(synth_data, tmp_path, capsys):
+    """An empty last.pt (a machine that crashed as it was written): --resume says so in one line and
+    continues from last.prev.pt, which then is last.pt again. Caught mutations: ``Trainer.save`` not
+    keeping the previous state; ``_newest_state`` without the fallback, or leaving the empty last.pt
+    (the next save would keep it as last.prev.pt)."""
+    run, sets = tmp_path / "run", ["train.val_every=off"]
+    train(tiny_config("train.max_steps=2", "train.checkpoint_every=1", *sets), synth_data, run, quiet=True)
+    last = run / "checkpoints" / "last.pt"
+    previous = load_checkpoint(run / "checkpoints" / "last.prev.pt")
+    assert 1 <= previous["step"] <= 2 and "optimizer" in previous
+    last.write_bytes(b"")
+    assert train(tiny_config("train.max_steps=3", *sets), synth_data, run, resume=True, quiet=True)["steps"] == 3
+    err = capsys.readouterr().err
+    assert f"{last}: not a readable checkpoint" in err and f"resuming from {last.with_name('last.prev.pt')}" in err
+    assert load_checkpoint(last)["step"] == 3  # one save at the end: the state it resumed from stays
+    assert load_checkpoint(last.with_name("last.prev.pt"))["step"] == previous["step"]
+    last.write_bytes(b"")
+    last.with_name("last.prev.pt").unlink()  # nothing to fall back to: the error names last.pt
+    with pytest.raises(PoseconsError, match=f"{last}: not a readable checkpoint"):
+        train(tiny_config("train.max_steps=4", *sets), synth_data, run, resume=True, quiet=True)
 
 
 def test_collapse_signs_count_warped_pixels_and_far_pinned_disparities():

@@ -108,6 +108,44 @@ def test_run_that_fails_before_training_leaves_no_folder(synth_data, tmp_path, c
     assert list(tmp_path.iterdir()) == []  # neither the run folder nor the parent it created
 
 
+def test_run_that_crashes_before_its_first_checkpoint_leaves_its_error_and_tensorboard_log(
+    synth_data, tmp_path, capsys, monkeypatch
+):
+    """A frame that fails to load at the second step: the run folder keeps crash.log and tb/ (with the
+    first step's losses) and nothing else; the next attempt there replaces the record. Caught
+    mutations: no crash record written; the discard not sparing it; an earlier record not cleared."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from posecons.training import trainer as trainer_module
+
+    real, calls = trainer_module.jitter_batch, []
+
+    def corrupt_second_batch(batch):
+        calls.append(1)
+        if len(calls) == 2:
+            raise OSError("image file is truncated")
+        return real(batch)
+
+    monkeypatch.setattr(trainer_module, "jitter_batch", corrupt_second_batch)
+    out = tmp_path / "run"
+    argv = ["train", "--config", "kitti/baseline", "--data-path", str(synth_data), "--out", str(out), "--quiet"]
+    argv += _sets("train.max_steps=2", "train.val_every=off", "train.log_every=1")
+    with pytest.raises(OSError, match="image file is truncated"):
+        cli(argv)
+    assert sorted(p.name for p in out.iterdir()) == ["crash.log", "tb"]
+    record = (out / "crash.log").read_text()
+    assert record.startswith("training crashed at step 1: OSError: image file is truncated") and "Traceback" in record
+    assert f"the error is in {out / 'crash.log'}" in capsys.readouterr().err
+    events = EventAccumulator(str(out / "tb"))
+    events.Reload()
+    assert [e.step for e in events.Scalars("loss/total")] == [1]
+
+    monkeypatch.setattr(trainer_module, "jitter_batch", real)
+    assert cli(argv) == 0
+    assert not (out / "crash.log").exists() and load_checkpoint(out / "checkpoints" / "last.pt")["step"] == 2
+    assert len(list((out / "tb").iterdir())) == 1  # the crashed attempt's events are gone with its record
+
+
 def test_resume_from_a_weights_only_checkpoint_is_refused(synth_data, tmp_path, capsys):
     run = tmp_path / "run"
     assert (

@@ -126,7 +126,9 @@ def _message(exc: PoseconsError) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv  # what a command that re-executes itself (train --devices N) passes on
     try:
         return int(args.func(args) or 0)
     except PoseconsError as exc:

@@ -1,7 +1,8 @@
 """The one way posecons writes files.
 
 * Every file appears complete or not at all: it is written under a temporary name beside its
-  target and renamed at the end, so an error or a kill never leaves a half-written file.
+  target, synced to disk and renamed at the end, so an error, a kill or a crash of the machine
+  never leaves a half-written file.
 * Permissions follow the user's umask (temporary files and folders are created 0600/0700 by
   the standard library, so they are widened to what a plain ``open``/``mkdir`` would give).
 * Nothing is deleted that posecons did not write: an output folder records the files it holds in
@@ -81,11 +82,33 @@ def atomic_file(path: str | Path) -> Iterator[Path]:
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~_umask())
+        # On disk before and after the rename: else a crash of the machine can leave an empty file.
+        _fsync(tmp)
         os.replace(tmp, path)
+        _fsync(path.parent)
     except BaseException:
         tmp.unlink(missing_ok=True)
         remove_empty(created)
         raise
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def keep_copy(source: str | Path, target: str | Path) -> None:
+    """Make ``target`` a second name of ``source``'s file (a hard link, or a copy where the
+    filesystem has none), atomically and on disk: ``source`` can then be replaced."""
+    with atomic_file(target) as tmp:
+        tmp.unlink()
+        try:
+            os.link(source, tmp)
+        except OSError:
+            shutil.copyfile(source, tmp)
 
 
 def remove_temporaries(folder: str | Path) -> list[Path]:

@@ -129,7 +129,11 @@ class PoseConsModel(nn.Module):
         sources = self.config.model.frame_ids[1:]
         return max(f for f in sources if f < 0), min(f for f in sources if f > 0)
 
-    def forward(self, batch: dict, step: int = 0) -> tuple[dict, dict[str, torch.Tensor]]:
+    def forward(
+        self, batch: dict, step: int = 0, with_constraints: bool = True
+    ) -> tuple[dict, dict[str, torch.Tensor]]:
+        """Outputs and losses of a training step; ``with_constraints=False`` (validation) computes
+        no constraint loss and draws nothing from the RNG for them."""
         m, lo = self.config.model, self.config.loss
         shape = (None, len(m.frame_ids), 3, m.height, m.width)
         frames = check_tensor("batch['frames']", batch["frames"], shape)
@@ -147,7 +151,7 @@ class PoseConsModel(nn.Module):
 
         # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group:
         # the temporal pairs for the whole batch, the constraint pairs for the samples `sub`.
-        constraints = self.active_constraints(step)
+        constraints = self.active_constraints(step) if with_constraints else []
         pairs = self.pose_pairs(constraints)
         n_temporal, batch_size = len(m.frame_ids) - 1, frames.shape[0]
         sub = self.constraint_samples(batch_size, frames.device) if constraints else slice(None)

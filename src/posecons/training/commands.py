@@ -93,8 +93,7 @@ def _launch_torchrun(args: argparse.Namespace) -> int:
         cmd += ["--rdzv-backend=c10d", f"--rdzv-endpoint={args.rdzv_endpoint}", "--rdzv-id=posecons"]
     else:
         cmd.append("--standalone")
-    argv = [a for a in sys.argv[1:]]
-    return subprocess.call(cmd + ["-m", "posecons.cli"] + argv)
+    return subprocess.call(cmd + ["-m", "posecons.cli"] + args.argv)
 
 
 def train_command(args: argparse.Namespace) -> int:

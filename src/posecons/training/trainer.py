@@ -7,6 +7,7 @@ that torchrun sets. The run directory holds everything of a run::
     RUN/config.yaml             resolved config
     RUN/checkpoints/last.pt     model, optimiser, scheduler, step, epoch, data position, RNG
                                 (with train.ema_decay > 0: "model" is the EMA, "raw_model" the trained weights)
+    RUN/checkpoints/last.prev.pt the last.pt before it: --resume falls back to it if last.pt does not load
     RUN/checkpoints/epoch_NN.pt weights (+ config, step) at each epoch end; train.keep_epochs of them
     RUN/checkpoints/best.pt     weights at the best validation abs rel (photometric loss without GT)
     RUN/tb/                     TensorBoard scalars and images
@@ -19,7 +20,8 @@ resumed ends with the same weights as an uninterrupted one (in deterministic mod
 SIGINT (Ctrl-C) or SIGTERM (what schedulers send before killing a job) stops the run at the next
 step boundary: ``last.pt`` is written and :class:`~posecons.errors.Interrupted` says how to resume.
 A second signal stops at once. A run that fails or is stopped before it saved any state leaves
-nothing behind in a run folder that was new or empty.
+nothing behind in a run folder that was new or empty, but for a crash during training:
+``RUN/crash.log`` (the error, its traceback) and ``RUN/tb/`` stay, until the next attempt there.
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ import random
 import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -53,7 +57,7 @@ from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
-from ..fileio import remove_empty, remove_temporaries, write_json, write_text
+from ..fileio import keep_copy, remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .init_from import load_initial_weights
 from .validation import Validator
@@ -123,23 +127,40 @@ class StopRequest:
 
 
 RUN_LOCK = ".lock"
+PREVIOUS = "last.prev.pt"  # the full state before last.pt
+CRASH_LOG = "crash.log"
+CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
 
 
 @contextlib.contextmanager
 def _hold_run_dir(out: Path):
     """Hold ``out``'s lock while a process trains there: a second process on the same run directory
     (two study sittings picking the same run, a repeated command) stops at once instead of writing
-    over the first one's checkpoints and logs."""
-    _writable_dir(out)
+    over the first one's checkpoints and logs. A folder that was new or empty when the lock was
+    taken holds only this process's files: a failure before the first checkpoint removes them
+    (yields whether it was)."""
+    created = _writable_dir(out)
     lock = FileLock(out / RUN_LOCK, timeout=0)
     try:
         lock.acquire()
     except Timeout:
         raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
+    left = {p.name for p in out.iterdir()} - {RUN_LOCK}
+    fresh, discard = not left or (CRASH_LOG in left and left <= set(CRASH_RECORD)), False
+    if fresh:  # this attempt replaces the crash record of an earlier one
+        _remove_all_but(out, {RUN_LOCK})
     try:
-        yield
+        yield fresh
+    except BaseException:
+        discard = fresh and not (out / "checkpoints" / "last.pt").exists()
+        if discard:  # a run that crashed in training keeps its record; the lock goes last, while held
+            _remove_all_but(out, {RUN_LOCK, *(CRASH_RECORD if (out / CRASH_LOG).is_file() else ())})
+            (out / RUN_LOCK).unlink()
+        raise
     finally:
         lock.release()
+        if discard:
+            remove_empty(created)
 
 
 def run_in_progress(out: Path) -> bool:
@@ -153,15 +174,17 @@ def run_in_progress(out: Path) -> bool:
         return True
 
 
-def _writable_dir(out: Path) -> None:
-    """Make ``out`` if needed; an unwritable one is an error naming it."""
+def _writable_dir(out: Path) -> list[Path]:
+    """Make ``out`` if needed and return the folders made, outermost first; an unwritable one is an
+    error naming it."""
+    created = [p for p in [out, *out.parents] if not p.exists()][::-1]
     try:
         out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write_test"
-        probe.write_text("ok")
-        probe.unlink()
+        with tempfile.TemporaryFile(dir=out):  # a probe of its own: other processes may probe at once
+            pass
     except OSError as exc:
         raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
+    return created
 
 
 def _prepare_run_dir(out: Path, resume: bool) -> None:
@@ -249,7 +272,7 @@ class Trainer:
         if resume:
             if self.env.main:  # a checkpoint being written when the run was killed
                 remove_temporaries(self.out / "checkpoints")
-            self._load(self.out / "checkpoints" / "last.pt")
+            self._load(*self._newest_state(self.out / "checkpoints"))
         elif self.env.main:
             write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         if not self.quiet:
@@ -296,8 +319,22 @@ class Trainer:
             },
         }
 
-    def _load(self, path: Path) -> None:
-        state = load_checkpoint(path, map_location=self.device)
+    def _newest_state(self, folder: Path) -> tuple[Path, dict[str, Any]]:
+        """``last.pt`` and its state or, where it does not load (e.g. a crash of the machine as it
+        was written), the ``last.prev.pt`` it replaced, which then takes its place."""
+        last, previous = folder / "last.pt", folder / PREVIOUS
+        try:
+            return last, load_checkpoint(last, map_location=self.device)
+        except PoseconsError as exc:
+            if not previous.is_file():
+                raise
+            state = load_checkpoint(previous, map_location=self.device)
+            if self.env.main:
+                print(f"{exc}; resuming from {previous} (step {state.get('step')}) instead", file=sys.stderr)
+                keep_copy(previous, last)
+            return previous, state
+
+    def _load(self, path: Path, state: dict[str, Any]) -> None:
         missing = [
             k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng") if k not in state
         ]
@@ -338,9 +375,13 @@ class Trainer:
                 torch.cuda.set_rng_state_all([s.cpu() for s in state["rng"]["cuda"]])
 
     def save(self) -> None:
-        """The full training state, for resuming: ``checkpoints/last.pt``."""
+        """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
+        as ``last.prev.pt``, what a resume falls back to should the newest not load."""
         if self.env.main:
-            save_checkpoint(self.out / "checkpoints" / "last.pt", self.state())
+            last = self.out / "checkpoints" / "last.pt"
+            if last.is_file():
+                keep_copy(last, last.with_name(PREVIOUS))
+            save_checkpoint(last, self.state())
 
     def save_weights(self, name: str, selected_by: str | None = None) -> None:
         """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
@@ -686,16 +727,33 @@ def use_deterministic_algorithms(device: torch.device) -> None:
     torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
 
 
-def _discard(out: Path, created: list[Path]) -> None:
-    """Remove what a run that never saved a state wrote into its new or empty folder, and the folder
-    and parents this call created."""
-    if out.is_dir():
-        for entry in out.iterdir():
-            if entry.is_dir() and not entry.is_symlink():
-                shutil.rmtree(entry)
-            else:
-                entry.unlink()
-    remove_empty(created)
+def _remove_all_but(out: Path, keep: set[str]) -> None:
+    """Remove the entries of a run folder whose files are all posecons's own, but those named ``keep``."""
+    for entry in out.iterdir():
+        if entry.name in keep:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+
+
+def _write_crash_record(trainer: Trainer, exc: BaseException) -> None:
+    """``RUN/crash.log`` (the error and its traceback) beside the flushed ``RUN/tb/``: what stays of a
+    run that crashed before its first checkpoint, whose other files are removed."""
+    out = trainer.out
+    if trainer.writer:
+        trainer.writer.close()
+    error = "".join(traceback.format_exception_only(exc)).strip()
+    write_text(
+        out / CRASH_LOG,
+        f"training crashed at step {trainer.step}: {error}\n\n" + "".join(traceback.format_exception(exc)),
+    )
+    print(
+        f"{out}: the run crashed at step {trainer.step}, before its first checkpoint; the error is in "
+        f"{out / CRASH_LOG}, the TensorBoard log in {out / 'tb'}",
+        file=sys.stderr,
+    )
 
 
 def _as_tuple(value):
@@ -715,21 +773,19 @@ def train(
     """Train a run and return a summary (steps, minutes, last validation metrics)."""
     out = Path(out)
     main = int(os.environ.get("RANK", 0)) == 0
-    fresh = main and not (out.exists() and any(out.iterdir()))  # then everything in it is this run's
-    created = [p for p in [out, *out.parents] if not p.exists()][::-1] if fresh else []  # made by the Trainer
     stop = StopRequest()
     with stop.installed():
-        try:
-            with _hold_run_dir(out) if main else contextlib.nullcontext():
-                trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
-                trainer.stop = stop
+        with _hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
+            trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+            trainer.stop = stop
+            try:
                 summary = trainer.fit()
-                if trainer.env.main:
-                    write_json(out / "train_summary.json", summary)
-        except BaseException:
-            if fresh and not (out / "checkpoints" / "last.pt").exists():
-                _discard(out, created)
-            raise
+            except Exception as exc:  # an Interrupted run stopped on purpose and needs no record
+                if fresh and not isinstance(exc, Interrupted) and not (out / "checkpoints" / "last.pt").exists():
+                    _write_crash_record(trainer, exc)
+                raise
+            if trainer.env.main:
+                write_json(out / "train_summary.json", summary)
     if dist.is_initialized():
         dist.barrier()
         dist.destroy_process_group()

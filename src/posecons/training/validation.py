@@ -44,8 +44,14 @@ class Validator:
 
     @torch.no_grad()
     def run(self, model, step: int) -> dict[str, Any]:
+        """Validate ``model``; the global RNG streams are left as they were (the DataLoader draws its
+        base seed from them), so how often a run validates does not change its training."""
         if not self.indices:
             return {}
+        with torch.random.fork_rng(devices=[self.device] if self.device.type == "cuda" else []):
+            return self._run(model, step)
+
+    def _run(self, model, step: int) -> dict[str, Any]:
         model.eval()
         m = self.config.model
         loader = DataLoader(
@@ -57,7 +63,7 @@ class Validator:
         photometric, disps, folders = [], [], []
         for batch in loader:
             batch = {k: v.to(self.device) if torch.is_tensor(v) else v for k, v in batch.items()}
-            outputs, losses = model(batch, step=step)
+            outputs, losses = model(batch, step=step, with_constraints=False)  # only the photometric loss is used
             photometric.append(float(losses["photometric"]) * len(batch["frames"]))
             disps.append(disp_to_depth(outputs["disp"][0], m.min_depth, m.max_depth)[0][:, 0].float().cpu().numpy())
             folders += list(batch["folder"])
