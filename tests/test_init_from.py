@@ -13,16 +13,11 @@ from posecons.config import load_config
 from posecons.errors import PoseconsError
 from posecons.model import PoseConsModel
 from posecons.training.trainer import initial_model, train
+from tiny import TINY_MODEL
 
 pytestmark = pytest.mark.slow
 TINY = [
-    "data.split=synth",
-    "model.height=64",
-    "model.width=192",
-    "model.num_layers=10",
-    "model.pretrained=false",
-    "train.batch_size=2",
-    "data.num_workers=0",
+    *TINY_MODEL,
     "train.val_every=off",
     "train.image_every=0",
 ]

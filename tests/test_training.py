@@ -19,16 +19,11 @@ from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
 from posecons.training import trainer as trainer_module
 from posecons.training.trainer import Trainer, collapse_signs, train
+from tiny import TINY_MODEL
 
 pytestmark = pytest.mark.slow
 TINY = [
-    "data.split=synth",
-    "model.height=64",
-    "model.width=192",
-    "model.num_layers=10",
-    "model.pretrained=false",
-    "train.batch_size=2",
-    "data.num_workers=0",
+    *TINY_MODEL,
     "train.val_samples=4",
     "train.log_every=1",
     "train.image_every=2",

@@ -12,16 +12,11 @@ import pytest
 
 from posecons.checkpoint import load_checkpoint
 from posecons.cli import main as cli
+from tiny import TINY_MODEL
 
 pytestmark = pytest.mark.slow
 TINY = [
-    "data.split=synth",
-    "model.height=64",
-    "model.width=192",
-    "model.num_layers=10",
-    "model.pretrained=false",
-    "train.batch_size=2",
-    "data.num_workers=0",
+    *TINY_MODEL,
     "train.val_samples=2",
     "train.image_every=0",
     "train.checkpoint_every=0",
