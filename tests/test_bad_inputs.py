@@ -234,6 +234,9 @@ CASES = [
     ("train-devices-0", TRAIN + " --devices 0", ["--devices", "≥ 1"]),
     ("train-max-steps-negative", TRAIN + " --max-steps -1", ["--max-steps", "≥ 0"]),
     ("train-out-under-file", TRAIN.replace("--out {out}", "--out {in}/blocker/run"), ["--out", "blocker is a file"]),
+    # import-monodepth2
+    ("import-monodepth2-no-folder", "import-monodepth2 {in}/nope --out {out}/m.pt", ["nope", "not a Monodepth2 model"]),
+    ("import-monodepth2-no-encoder", "import-monodepth2 {in}/userdir --out {out}/m.pt", ["encoder.pth is missing"]),
     # demo
     ("demo-out-under-file", "demo --out {in}/blocker/demo", ["--out", "blocker is a file"]),
     ("demo-seed-negative", "demo --out {out} --seed -1", ["--seed", "≥ 0"]),

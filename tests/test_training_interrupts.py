@@ -28,6 +28,12 @@ def synth_data(make_synth) -> Path:
     return make_synth(2, 10, 192, 64, 5)
 
 
+def _default_sigint() -> None:
+    """Ctrl-C reaches the command as from a terminal even when the suite itself runs under nohup or as
+    a background job: those start with SIGINT ignored, children inherit that, and Python keeps it so."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _sets(*extra: str) -> list[str]:
     return sum([["--set", s] for s in TINY + list(extra)], [])
 
@@ -50,7 +56,12 @@ def _interrupt(synth_data: Path, run: Path, signum: int) -> int:
         *_sets("train.max_steps=6", "train.val_every=1", "data.num_workers=1"),
     ]
     proc = subprocess.Popen(
-        args, env={**os.environ, "OMP_NUM_THREADS": "1"}, stderr=subprocess.PIPE, text=True, start_new_session=True
+        args,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=_default_sigint,
     )
     deadline = time.time() + 300
     while time.time() < deadline and proc.poll() is None and not (run / "metrics.jsonl").is_file():
@@ -189,6 +200,7 @@ def test_ctrl_c_during_synth_leaves_nothing(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=_default_sigint,
     )
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None and not list(out.parent.glob(".synth.partial-*/2020_01_01")):

@@ -20,7 +20,8 @@ resumed ends with the same weights as an uninterrupted one (in deterministic mod
 SIGINT (Ctrl-C) or SIGTERM (what schedulers send before killing a job) stops the run at the next
 step boundary: ``last.pt`` is written and :class:`~posecons.errors.Interrupted` says how to resume.
 A second signal stops at once. A run that fails or is stopped before it saved any state leaves
-nothing behind in a run folder that was new or empty, but for a crash during training:
+nothing behind in a run folder that was new or empty, but for a crash during training (an error that is
+no bad input):
 ``RUN/crash.log`` (the error, its traceback) and ``RUN/tb/`` stay, until the next attempt there.
 """
 
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import datetime
 import math
 import os
 import random
@@ -127,6 +129,7 @@ class StopRequest:
 
 
 RUN_LOCK = ".lock"
+VALIDATION_WAIT = datetime.timedelta(hours=2)  # how long the other ranks wait for the main rank's validation
 PREVIOUS = "last.prev.pt"  # the full state before last.pt
 CRASH_LOG = "crash.log"
 CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
@@ -228,11 +231,14 @@ class Trainer:
                 f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
                 "more data (`posecons synth` prints how many training lines it wrote)"
             )
-        # Validation (and its one-off ground-truth export) happens on the main rank only.
+        # Validation (and its one-off ground-truth export) happens on the main rank only; the others
+        # wait for it in a group of their own, whose timeout is sized for a validation, not a step.
+        validates = bool(val_file) and t.val_every != "off"
         self.validator = (
-            Validator(config, data_path, val_file, self.out, self.device)
-            if val_file and t.val_every != "off" and self.env.main
-            else None
+            Validator(config, data_path, val_file, self.out, self.device) if validates and self.env.main else None
+        )
+        self._validation_wait = (
+            dist.new_group(backend="gloo", timeout=VALIDATION_WAIT) if validates and self.env.world > 1 else None
         )
         if t.best_metric == "abs_rel" and self.validator is not None and self.validator.gt is None:
             raise PoseconsError(
@@ -623,9 +629,15 @@ class Trainer:
             self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
 
     def validate(self) -> dict[str, Any]:
-        """Validate on the main rank; keep ``checkpoints/best.pt`` at the best score so far."""
-        if not self.validator or not self.env.main:
-            return {}
+        """Validate on the main rank while the other ranks wait at a barrier (a long validation would
+        otherwise reach the training collectives' timeout, NCCL's 10 minutes, in their next step)."""
+        metrics = self._validate_here() if self.validator else {}
+        if self._validation_wait is not None:
+            dist.monitored_barrier(self._validation_wait, timeout=VALIDATION_WAIT)
+        return metrics
+
+    def _validate_here(self) -> dict[str, Any]:
+        """Validate; keep ``checkpoints/best.pt`` at the best score so far."""
         metrics = self.validator.run(self.eval_model, self.step)
         self.model.train()
         if not metrics:
@@ -780,8 +792,8 @@ def train(
             trainer.stop = stop
             try:
                 summary = trainer.fit()
-            except Exception as exc:  # an Interrupted run stopped on purpose and needs no record
-                if fresh and not isinstance(exc, Interrupted) and not (out / "checkpoints" / "last.pt").exists():
+            except Exception as exc:  # bad input (one line, exit 2) and interrupts are no crash: no record
+                if fresh and not isinstance(exc, PoseconsError) and not (out / "checkpoints" / "last.pt").exists():
                     _write_crash_record(trainer, exc)
                 raise
             if trainer.env.main:
