@@ -170,6 +170,55 @@ def test_two_study_processes_share_a_folder_without_redoing_or_clashing(tmp_path
     assert calls == ["baseline", "cyc"] and "runs done: 3 of 3" in (out / "results.md").read_text()
 
 
+def test_a_failing_run_is_recorded_and_the_others_go_on(tmp_path, monkeypatch, capsys):
+    """A run fails, the next one trains: the failure is recorded (error line, traceback log), listed in
+    the report, the rest trains, exit status 1; the same command retries only it and clears the record.
+    Mutations: stopping at the first failure (baseline untrained); no record; a record kept after success."""
+    variants = {v: [f"loss.constraints=[{c}]"] for v, c in (("baseline", ""), ("broken", "cyc"), ("id", "id"))}
+    spec, out = write_spec(tmp_path / "toy.yaml", variants=variants), tmp_path / "study"
+    argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu"]
+    real_train, calls = runner.train, []
+
+    def flaky(config, data, run_dir, **kwargs):
+        calls.append(run_dir.parent.name)
+        if run_dir.parent.name == "broken" and calls.count("broken") == 1:
+            raise RuntimeError("boom in the loader")
+        return real_train(config, data, run_dir, **kwargs)
+
+    monkeypatch.setattr(runner, "train", flaky)
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "1 of 3 runs failed" in err and "broken seed 0: RuntimeError: boom in the loader" in err
+    record = json.loads((out / "results" / "failed" / "broken_seed0.json").read_text())
+    assert record["error"] == "RuntimeError: boom in the loader"
+    assert "Traceback" in Path(record["log"]).read_text() and (out / "results" / "id_seed0.json").is_file()
+    assert "**failed** (the same command retries it): broken seed 0: RuntimeError" in (out / "results.md").read_text()
+
+    assert main(argv) == 0 and calls == ["baseline", "broken", "id", "broken"]
+    assert not (out / "results" / "failed" / "broken_seed0.json").exists()
+    assert "failed" not in (out / "results.md").read_text().split("## ")[0]
+
+
+@pytest.mark.slow
+def test_a_failing_worker_does_not_stop_the_other_lanes(tmp_path, capsys):
+    """--jobs 2 with a run that fails at once: the third run still starts (it used to stop scheduling)."""
+    variants = {
+        "broken": ["train.batch_size=64"],
+        "baseline": ["loss.constraints=[]"],
+        "cyc": ["loss.constraints=[cyc]"],
+    }
+    spec, out = write_spec(tmp_path / "toy.yaml", variants=variants), tmp_path / "study"
+    argv = ["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu", "--jobs", "2"]
+    assert main(argv) == 1
+    assert all((out / "results" / f"{v}_seed0.json").is_file() for v in ("baseline", "cyc"))
+    record = json.loads((out / "results" / "failed" / "broken_seed0.json").read_text())
+    assert (
+        record["error"].startswith("exit status 2: posecons study (broken seed 0): error: ")
+        and "fewer than one batch" in record["error"]
+    )
+    assert record["log"].endswith("study.log") and "FAILED broken seed 0" in capsys.readouterr().out
+
+
 def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     """The committed results folder holds five seeds of baseline and cyc and other specs' variants;
     a report of two seeds and one variant averages and pairs those alone. Its JSONs predate t_err /

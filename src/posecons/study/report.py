@@ -20,6 +20,7 @@ from ..metrics.stats import MIN_SEEDS, mean_std, paired_differences, summarise_d
 from .spec import FLOOR, UNTRAINED
 
 STUDY_FILE = "study.json"
+FAILED = "failed"  # the subfolder of the failed runs' records
 Getter = Callable[[dict], Any]
 # (JSON key, header, format) of the Eigen metrics; a_k is δ < 1.25^k.
 DEPTH_COLUMNS = (
@@ -62,6 +63,11 @@ def load_results(folder: Path) -> list[dict]:
             raise PoseconsError(f"{path}: not a study result (no variant, seed and depth)")
         results.append(result)
     return results
+
+
+def load_failures(folder: Path) -> list[dict]:
+    """The records of the runs that failed (``folder/failed/*.json``), until a rerun succeeds."""
+    return [read_json(p) for p in sorted((Path(folder) / FAILED).glob("*.json"))]
 
 
 def read_json(path: Path) -> dict:
@@ -273,7 +279,7 @@ def _data_line(data: dict) -> str:
     return f"KITTI raw `{data['path']}`, test split `{data['test_split']}` (LiDAR ground truth){pose}"
 
 
-def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
+def report_text(study: dict, results: Sequence[dict], figures: Path, failures: Sequence[dict] = ()) -> str:
     """The whole report (Markdown); writes its figures into ``figures``."""
     from ..plots import plot_paired_differences
 
@@ -284,6 +290,10 @@ def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
     envs = [r["environment"] for r in results if "environment" in r]
     code = "; ".join(dict.fromkeys(f"commit `{e['commit']}` on {e['machine']} (torch {e['torch']})" for e in envs))
     trained = [r for r in results if r["variant"] not in (UNTRAINED, FLOOR)]
+    failed = "".join(
+        f"\n- **failed** (the same command retries it): {f['variant']} seed {f['seed']}: {f['error']} (log: `{f['log']}`)"
+        for f in failures
+    )
     overview = _table(
         ["variant", "overrides (after the spec's)", "runs done", "steps", "train minutes"],
         [
@@ -304,7 +314,7 @@ def report_text(study: dict, results: Sequence[dict], figures: Path) -> str:
 - seeds: {", ".join(map(str, study["seeds"]))} (`train.seed`: the same initial weights and data order for every variant of a seed)
 - code and machine: {code or "–"}
 - generated: {datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")}
-- runs done: {done} of {runs}{"; missing: " + ", ".join(missing) if missing else ""}{"; untrained missing for seeds " + ", ".join(untrained_missing) if untrained_missing else ""}
+- runs done: {done} of {runs}{"; missing: " + ", ".join(missing) if missing else ""}{"; untrained missing for seeds " + ", ".join(untrained_missing) if untrained_missing else ""}{failed}
 - weights evaluated: each run's `checkpoints/last.pt`, the last step (no model selection, no ground truth);
   `untrained` is the initial network of each seed; `renderer_depth` (synthetic data) is the renderer's
   exact depth evaluated as a prediction, the floor no network can beat here
@@ -365,7 +375,8 @@ def write_report(results_dir: Path, report: Path, study: dict | None = None, pub
         for r in load_results(results_dir)
         if r["variant"] in names and (r["variant"] == FLOOR or r["seed"] in study["seeds"])
     ]
-    text = report_text(study, results, figures)
+    in_study = [f for f in load_failures(results_dir) if f["variant"] in names and f["seed"] in study["seeds"]]
+    text = report_text(study, results, figures, in_study)
     copies = figures / "json"
     if publish and copies.resolve() != results_dir.resolve():
         with output_dir(copies) as tmp:

@@ -10,8 +10,13 @@ The study folder::
     OUT/results/study.json             the spec as last run (variant order, seeds, data)
     OUT/results/<variant>_seed<k>.json one evaluation each, written when it is complete: present = done
     OUT/results/untrained_seed<k>.json the untrained network of seed k, the reference row
+    OUT/results/failed/<variant>_seed<k>.*     the error (.json) and traceback (.log) of a failed run
     OUT/results.md, OUT/results/*.png  the report (or --report PATH)
     OUT/.study.lock                    held while a study process prepares the data and reference rows
+
+A run that fails (a crash, a bad frame) does not stop the others: its error line and log are
+recorded, the report lists it, and the command exits with status 1 once the rest are done; running
+it again retries the failed runs.
 
 Several study processes may share one folder (two terminals, two machines on a shared disk): a run
 that another one is training is skipped, and one finished meanwhile is not redone.
@@ -30,6 +35,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import traceback
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -47,12 +53,18 @@ from ..data.synth import generate_synth
 from ..data.synth.oracle import oracle_disparities
 from ..errors import Interrupted, PoseconsError
 from ..evaluation import evaluate
-from ..fileio import check_writable, make_dirs, write_json
+from ..fileio import check_writable, make_dirs, write_json, write_text
 from ..training.trainer import run_in_progress, save_initial_weights, train
-from .report import STUDY_FILE, read_json, write_report
+from .report import FAILED, STUDY_FILE, read_json, write_report
 from .spec import FLOOR, UNTRAINED, StudySpec
 
 SCALINGS = ("frame", "sequence")
+
+
+class RunsFailed(PoseconsError):
+    """Some runs of a study failed; the others finished."""
+
+    exit_code = 1
 
 
 def result_name(variant: str, seed: int) -> str:
@@ -90,6 +102,10 @@ class Progress:
         self.left, self.skipped = self.left - 1, self.skipped + 1
         self.line(f"skip {variant} seed {seed}: {why} ({self.left} runs left)")
         return True
+
+    def failed(self, variant: str, seed: int, error: str) -> None:
+        self.left -= 1
+        self.line(f"FAILED {variant} seed {seed}: {error} ({self.left} runs left)")
 
     def done(self, result: dict, started: float) -> None:
         self.left -= 1
@@ -231,6 +247,20 @@ def depth_floor(spec: StudySpec, data: StudyData) -> dict[str, Any]:
     return {"variant": FLOOR, "seed": 0, "depth": depth}
 
 
+def record_failure(out: Path, variant: str, seed: int, error: str, log: Path) -> str:
+    """Write the failure record of (variant, seed) and return its line for the summary."""
+    write_json(
+        out / "results" / FAILED / result_name(variant, seed),
+        {"variant": variant, "seed": seed, "error": error, "log": str(log), "finished": _now()},
+    )
+    return f"{variant} seed {seed}: {error} (log: {log})"
+
+
+def _last_line(log: Path) -> str:
+    lines = [line.strip() for line in log.read_text(errors="replace").splitlines() if line.strip()]
+    return lines[-1] if lines else "no output"
+
+
 def _train(config: Config, data: StudyData, run_dir: Path, accelerator: str, quiet: bool) -> dict:
     """Train a run, resume an interrupted one, or read the summary of a finished one."""
     summary, last = run_dir / "train_summary.json", run_dir / "checkpoints" / "last.pt"
@@ -268,16 +298,18 @@ def train_and_evaluate(
         "finished": _now(),
     }
     write_json(out / "results" / result_name(variant, seed), result)
+    (out / "results" / FAILED / result_name(variant, seed)).unlink(missing_ok=True)
     return result
 
 
 def _run_side_by_side(
     spec: StudySpec, out: Path, todo: list[tuple[str, int]], jobs: int, accelerator: str, progress: Progress, refresh
-) -> None:
+) -> list[str]:
     """``todo`` with ``jobs`` runs at a time, each in a process of its own (``python -m
     posecons.study.worker``) with the CPU threads shared out: on two cores two one-thread runs get
     more done than one two-thread run, whose threads wait on each other. A signal is passed on to the
-    runs (in sessions of their own, so a terminal's Ctrl-C reaches them once), which save and stop."""
+    runs (in sessions of their own, so a terminal's Ctrl-C reaches them once), which save and stop.
+    Returns a line for each run that failed."""
     import torch
 
     threads = max(1, torch.get_num_threads() // jobs)
@@ -291,7 +323,7 @@ def _run_side_by_side(
     previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         while pending or running:
-            while pending and len(running) < jobs and not (stopped or failed):
+            while pending and len(running) < jobs and not stopped:
                 variant, seed = pending.pop(0)
                 if progress.taken(out, variant, seed):
                     continue
@@ -321,7 +353,9 @@ def _run_side_by_side(
                     progress.done(read_json(out / "results" / result_name(variant, seed)), started)
                     refresh()
                 elif not stopped:
-                    failed.append(f"{variant} seed {seed} failed (exit status {proc.returncode}; log: {log.name})")
+                    error = f"exit status {proc.returncode}: {_last_line(Path(log.name))}"
+                    failed.append(record_failure(out, variant, seed, error, Path(log.name)))
+                    progress.failed(variant, seed, error)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
@@ -331,8 +365,7 @@ def _run_side_by_side(
             "`posecons study` command again to continue",
             stopped[0],
         )
-    if failed:
-        raise PoseconsError("; ".join(failed))
+    return failed
 
 
 def run_study(
@@ -363,19 +396,33 @@ def run_study(
     progress = Progress(len(todo))
     progress.line(f"{len(done)} of {len(spec.runs())} runs done before, {len(todo)} to go")
 
-    if jobs > 1:
-        _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh)
+    failed = _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh) if jobs > 1 else []
     for variant, seed in todo if jobs == 1 else []:
         if progress.taken(out, variant, seed):
             continue
-        progress.line(
-            f"start {variant} seed {seed} → {out / 'runs' / variant / f'seed{seed}'} ({progress.left} runs left)"
-        )
+        run_dir = out / "runs" / variant / f"seed{seed}"
+        progress.line(f"start {variant} seed {seed} → {run_dir} ({progress.left} runs left)")
         started = time.monotonic()
-        progress.done(train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env), started)
+        try:
+            result = train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env)
+        except Interrupted:
+            raise
+        except Exception as exc:  # the next run goes on; the record keeps the error and its traceback
+            error = "".join(traceback.format_exception_only(exc)).strip().splitlines()[-1]
+            log = out / "results" / FAILED / f"{variant}_seed{seed}.log"
+            write_text(log, "".join(traceback.format_exception(exc)))
+            failed.append(record_failure(out, variant, seed, error, log))
+            progress.failed(variant, seed, error)
+            continue
+        progress.done(result, started)
         refresh()
-    if progress.skipped or not todo:  # else the last run's refresh wrote it
+    if progress.skipped or failed or not todo:  # else the last run's refresh wrote it
         refresh()
+    if failed:
+        raise RunsFailed(
+            f"{len(failed)} of {len(todo)} runs failed (the others finished; run the same command again to "
+            "retry them): " + "; ".join(failed)
+        )
     return len(todo) - progress.skipped
 
 
