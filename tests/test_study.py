@@ -102,7 +102,7 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
         and "| baseline | 1 |" in report
         and "| cyc | 1 |" in report
     )
-    assert "| mean σ/μ | cyc | 1 |" in report and "interval not meaningful" in report
+    assert "| **mean σ/μ** (primary) | cyc | 1 |" in report and "untestable (n < 6)" in report
     for plot in ("scale_boxplot.png", "scale_over_time.png", "paired_differences.png"):
         assert (results / plot).stat().st_size > 1000 and f"results/{plot}" in report
 
@@ -232,7 +232,7 @@ def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     )
     text = report.read_text()
     assert "| untrained | 2 |" in text and "| baseline | 2 |" in text and "| cyc | 2 |" in text
-    assert "| mean σ/μ | cyc | 2 |" in text and "| renderer_depth | 1 |" in text
+    assert "| **mean σ/μ** (primary) | cyc | 2 |" in text and "| renderer_depth | 1 |" in text
     assert "cyc_temporal" not in text and "| id |" not in text
     assert "| t_err (%) | r_err (°/100 m) |" in text and "| 163.95 ± 48.79 | 4.98 ± 0.41 |" in text  # untrained, 06
 

@@ -145,7 +145,7 @@ def plot_paired_differences(rows: Sequence[dict], path: str | Path) -> Path:
         ax.set_title(metric, fontsize=9)
         ax.tick_params(axis="x", labelsize=7)
         ax.locator_params(axis="x", nbins=4)
-    fig.suptitle("difference from the reference, mean over seeds with its bootstrap interval", fontsize=9)
+    fig.suptitle("difference from the reference, mean over seeds with its 95 % t-interval", fontsize=9)
     return _save(fig, path)
 
 

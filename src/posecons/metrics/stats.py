@@ -1,18 +1,26 @@
-"""Statistics of a multi-seed study: spread over seeds, paired differences against a reference
-variant, and percentile-bootstrap intervals of their mean (numpy only).
+"""Statistics of a multi-seed study: paired differences of each variant from a reference, an exact
+sign-flip test of each, a t-interval of the mean difference, the minimal detectable effect, and
+Holm's correction across the comparisons that share a verdict.
 
-Runs of different variants with the same seed share initial weights and data order, so the
-difference of two variants is taken seed by seed (paired), which removes the seed's own effect
-from the comparison; the bootstrap resamples those per-seed differences.
+Runs of different variants with the same seed share initial weights and data order, so two variants
+are compared seed by seed (paired), which removes the seed's own effect from the comparison. The test
+asks whether the per-seed differences are symmetric about zero: under that null each of the 2ⁿ sign
+assignments is equally likely, so the exact p-value needs no normality. Its smallest two-sided value is
+2/2ⁿ, so no verdict at α = 0.05 is possible below :data:`MIN_SEEDS` seeds. (The percentile bootstrap
+used before is [min, max] of three differences at n = 3, a 75 % interval.)
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from scipy import optimize, stats
 
-MIN_SEEDS = 3  # below this many paired seeds a bootstrap interval says nothing useful
+ALPHA = 0.05  # two-sided level of every test, after Holm's correction
+POWER = 0.8  # the power at which the minimal detectable effect is given
+MIN_SEEDS = 6  # the fewest paired seeds whose exact two-sided p can fall below ALPHA: 2/2⁶ = 0.031
 
 
 def mean_std(values: Sequence[float]) -> tuple[float, float]:
@@ -40,17 +48,63 @@ def paired_differences(
     return out
 
 
-def bootstrap_interval(x: Sequence[float], n: int = 10_000, level: float = 0.95, seed: int = 0) -> tuple[float, float]:
-    """Percentile-bootstrap interval of the mean of ``x`` (K,): ``n`` resamples of K values drawn with
-    replacement, from a generator seeded with ``seed`` (the same numbers give the same interval)."""
+def sign_flip_p(x: Sequence[float]) -> float:
+    """Exact two-sided p-value of the paired sign-flip (permutation) test of mean 0: the mean of ``x``
+    against its values under all 2ⁿ sign assignments (scipy.stats.permutation_test)."""
     x = np.asarray(x, dtype=np.float64)
     if x.size == 0:
+        return float("nan")
+    if x.size == 1 or not x.any():  # both sign assignments (or all) are as far from 0
+        return 1.0
+    result = stats.permutation_test(
+        (x,), np.mean, permutation_type="samples", n_resamples=np.inf, alternative="two-sided", vectorized=True
+    )
+    return float(result.pvalue)
+
+
+def t_interval(x: Sequence[float], level: float = 1 - ALPHA) -> tuple[float, float]:
+    """Student-t interval of the mean of ``x`` (NaN for fewer than 2 values)."""
+    x = np.asarray(x, dtype=np.float64)
+    if x.size < 2:
         return float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, x.size, size=(n, x.size))].mean(axis=1)
-    tail = 100 * (1 - level) / 2
-    low, high = np.percentile(means, [tail, 100 - tail])
+    if not np.ptp(x):
+        return float(x[0]), float(x[0])
+    low, high = stats.ttest_1samp(x, 0.0).confidence_interval(level)
     return float(low), float(high)
+
+
+def minimal_detectable_effect(sd: float, n: int, alpha: float = ALPHA, power: float = POWER) -> float:
+    """The smallest true mean difference that a two-sided paired t-test at ``alpha`` finds with
+    probability ``power``, for ``n`` seeds whose differences have standard deviation ``sd`` (from the
+    noncentral t distribution; NaN below 2 seeds)."""
+    if n < 2 or not math.isfinite(sd):
+        return float("nan")
+    if sd == 0:
+        return 0.0
+    df, critical = n - 1, stats.t.ppf(1 - alpha / 2, n - 1)
+
+    def shortfall(effect: float) -> float:
+        shift = effect * math.sqrt(n) / sd
+        # P(T < −critical) as the upper tail of −T: scipy's lower tail turns NaN far out
+        return stats.nct.sf(critical, df, shift) + stats.nct.sf(critical, df, -shift) - power
+
+    # Twice the textbook approximation (t quantiles in place of the normal ones) overshoots the root.
+    upper = 2 * (critical + stats.t.ppf(power, df)) * sd / math.sqrt(n)
+    return float(optimize.brentq(shortfall, 0.0, upper))
+
+
+def holm(pvalues: Sequence[float]) -> list[float]:
+    """Holm's step-down adjustment of ``pvalues`` (NaN entries are left out and stay NaN): the k-th
+    smallest of m is multiplied by m − k + 1, made monotone and capped at 1."""
+    p = np.asarray(pvalues, dtype=np.float64)
+    adjusted = np.full(p.shape, np.nan)
+    finite = np.flatnonzero(np.isfinite(p))
+    order = finite[np.argsort(p[finite], kind="stable")]
+    running = 0.0
+    for k, i in enumerate(order):
+        running = max(running, min(1.0, (len(order) - k) * p[i]))
+        adjusted[i] = running
+    return adjusted.tolist()
 
 
 def signs(x: Sequence[float]) -> str:
@@ -58,27 +112,48 @@ def signs(x: Sequence[float]) -> str:
     return " ".join("−" if v < 0 else "+" if v > 0 else "0" for v in x)
 
 
-def verdict(low: float, high: float) -> str:
-    """'lower' / 'higher' when the interval [low, high] excludes 0, else 'within noise'."""
-    if high < 0:
-        return "lower"
-    if low > 0:
-        return "higher"
-    return "within noise"
-
-
-def summarise_differences(diffs: Mapping[int, float], n: int = 10_000, level: float = 0.95, seed: int = 0) -> dict:
-    """Mean of per-seed differences {seed: d}, its bootstrap interval, the signs in seed order, the
-    verdict, and whether the interval is meaningful (at least :data:`MIN_SEEDS` seeds)."""
+def summarise_differences(diffs: Mapping[int, float]) -> dict:
+    """Per-seed differences {seed: d} → n, mean, sd, t-interval (low, high), exact sign-flip p,
+    minimal detectable effect and the signs in seed order; :func:`verdict` decides after correction."""
     x = [diffs[s] for s in sorted(diffs)]
-    low, high = bootstrap_interval(x, n, level, seed)
+    mean, sd = mean_std(x)
+    low, high = t_interval(x)
     return {
         "n": len(x),
-        "mean": float(np.mean(x)) if x else float("nan"),
+        "mean": mean,
+        "sd": sd,
         "low": low,
         "high": high,
-        "level": level,
+        "level": 1 - ALPHA,
+        "p": sign_flip_p(x),
+        "mde": minimal_detectable_effect(sd, len(x)),
         "signs": signs(x),
-        "verdict": verdict(low, high) if x else "no paired seeds",
-        "meaningful": len(x) >= MIN_SEEDS,
     }
+
+
+def verdict(summary: Mapping, p_adjusted: float) -> str:
+    """'lower' / 'higher' when the corrected p is below :data:`ALPHA`; else why not."""
+    n = summary["n"]
+    if n == 0:
+        return "no paired seeds"
+    if n < MIN_SEEDS:
+        return f"untestable (n < {MIN_SEEDS})"
+    if p_adjusted < ALPHA:
+        return "lower" if summary["mean"] < 0 else "higher"
+    return "not shown"
+
+
+def compare(differences: Mapping[str, Mapping[int, float]]) -> dict[str, dict]:
+    """Each comparison's summary, its Holm-corrected p (over all of ``differences``: one family) and
+    its verdict."""
+    summaries = {name: summarise_differences(d) for name, d in differences.items()}
+    adjusted = holm([s["p"] for s in summaries.values()])
+    return {name: {**s, "p_holm": p, "verdict": verdict(s, p)} for (name, s), p in zip(summaries.items(), adjusted)}
+
+
+if __name__ == "__main__":  # python -m posecons.metrics.stats d1 d2 …: one paired comparison
+    import sys
+
+    values = [float(v) for v in sys.argv[1:]]
+    summary = compare({"differences": dict(enumerate(values))})["differences"]
+    print(", ".join(f"{k} {v}" for k, v in summary.items()))

@@ -1,6 +1,6 @@
 """The study report, from the result JSONs alone: depth in the paper's Table 1 layout (frame and
 per-sequence median scaling), pose in its Table 3 layout, paired differences from the reference
-variant with bootstrap intervals, and Figure 1 (per-frame scales) for the reference and the most
+variant with exact paired tests (metrics.stats), and Figure 1 (per-frame scales) for the reference and the most
 scale-consistent variant. ``--report-only`` rebuilds it from a folder of JSONs (e.g. committed ones).
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 
 from ..errors import PoseconsError
 from ..fileio import output_dir, write_text
-from ..metrics.stats import MIN_SEEDS, mean_std, paired_differences, summarise_differences
+from ..metrics.stats import ALPHA, MIN_SEEDS, POWER, compare, mean_std, paired_differences
 from .spec import FLOOR, UNTRAINED
 
 STUDY_FILE = "study.json"
@@ -177,10 +177,13 @@ def pose_tables(names: Sequence[str], results: Sequence[dict]) -> str:
     return "\n".join(text)
 
 
+PRIMARY = "mean σ/μ"  # the study's pre-declared primary metric: the weights evaluated (EMA where kept)
+
+
 def paired_metrics(results: Sequence[dict]) -> list[tuple[str, Getter, str]]:
-    """(label, getter, format) of the metrics compared seed by seed."""
+    """(label, getter, format) of the metrics compared seed by seed; the first is :data:`PRIMARY`."""
     metrics = [
-        ("mean σ/μ", _depth("frame", "scale_cv"), ".4f"),
+        (PRIMARY, _depth("frame", "scale_cv"), ".4f"),
         ("abs rel", _depth("frame", "abs_rel"), ".4f"),
         ("abs rel, per-seq. scaling", _depth("sequence", "abs_rel"), ".4f"),
         ("δ<1.25", _depth("frame", "a1"), ".4f"),
@@ -192,37 +195,65 @@ def paired_metrics(results: Sequence[dict]) -> list[tuple[str, Getter, str]]:
 
 
 def paired_rows(variants: Sequence[str], results: Sequence[dict]) -> list[dict]:
-    """For each metric and each variant but the reference (the first): the summary of its per-seed
-    differences from the reference (:func:`~posecons.metrics.stats.summarise_differences`)."""
-    rows = []
+    """For each metric and each variant but the reference (the first): the statistics of its per-seed
+    differences from the reference (:func:`~posecons.metrics.stats.compare`). Holm's correction runs
+    over the variants for the primary metric, and over every row of the secondary metrics together,
+    so that neither the variants nor the many secondary rows inflate the verdicts."""
+    differences = {}
     for label, get, fmt in paired_metrics(results):
         values = _values([r for r in results if r["variant"] in variants], get)
         diffs = paired_differences({v: values.get(v, {}) for v in variants}, variants[0])
-        for variant in variants[1:]:
-            rows.append({"metric": label, "variant": variant, "format": fmt, **summarise_differences(diffs[variant])})
+        differences.update({(label, fmt, v): diffs[v] for v in variants[1:]})
+    rows = []
+    for primary in (True, False):
+        family = {key: d for key, d in differences.items() if (key[0] == PRIMARY) == primary}
+        for (label, fmt, variant), stats in compare(family).items():
+            rows.append({"metric": label, "variant": variant, "format": fmt, "primary": primary, **stats})
     return rows
 
 
 def paired_table(rows: Sequence[dict], reference: str) -> str:
+    """One line per comparison. Below :data:`MIN_SEEDS` seeds no interval, p or MDE is printed: no
+    exact test can reach the level there, and an interval of so few seeds would claim more than it holds.
+    The SD of the differences is always printed: it sizes the seeds a verdict needs."""
     cells = []
     for r in rows:
-        fmt = r["format"]
+        fmt, testable = r["format"], r["n"] >= MIN_SEEDS
+        metric = f"**{r['metric']}** (primary)" if r["primary"] else r["metric"]
         if r["n"] == 0:
-            cells.append([r["metric"], r["variant"], "0", "–", "–", "–", "no paired seeds"])
+            cells.append([metric, r["variant"], "0"] + ["–"] * 7 + [r["verdict"]])
             continue
-        word = r["verdict"] if r["meaningful"] else f"{r['verdict']} (n < {MIN_SEEDS}: interval not meaningful)"
+        numbers = [
+            f"[{r['low']:+{fmt}}, {r['high']:+{fmt}}]",
+            f"{r['p']:.3f}",
+            f"{r['p_holm']:.3f}",
+            f"{r['mde']:{fmt}}",
+        ]
+        verdict = r["verdict"] if r["verdict"] != "not shown" else f"not shown (MDE {r['mde']:{fmt}})"
         cells.append(
             [
-                r["metric"],
+                metric,
                 r["variant"],
                 str(r["n"]),
                 f"{r['mean']:+{fmt}}",
-                f"[{r['low']:+{fmt}}, {r['high']:+{fmt}}]",
-                r["signs"],
-                word,
+                "–" if math.isnan(r["sd"]) else f"{r['sd']:{fmt}}",
             ]
+            + (numbers if testable else ["–"] * 4)
+            + [r["signs"], verdict]
         )
-    header = ["metric", f"variant − {reference}", "n seeds", "mean difference", "95 % interval", "signs", "verdict"]
+    header = [
+        "metric",
+        f"variant − {reference}",
+        "n seeds",
+        "mean difference",
+        "SD",
+        f"{1 - ALPHA:.0%} t-interval",
+        "p (exact sign-flip)",
+        "p (Holm)",
+        f"MDE ({POWER:.0%} power)",
+        "signs",
+        "verdict",
+    ]
     return _table(header, cells)
 
 
@@ -348,11 +379,16 @@ first ground-truth step and needs no images.
 {pose_tables(names, results)}
 ## Paired differences from {variants[0]}
 
-Per seed, variant − {variants[0]} (the same seed: the same initial weights and data order), then the
-mean over seeds and a 95 % percentile-bootstrap interval of that mean (10 000 resamples of the seeds
-with replacement, RNG seed 0). "lower"/"higher": the interval excludes 0; "within noise": it does
-not. n = {", ".join(map(str, n))} seeds{"; below " + str(MIN_SEEDS) + " seeds the interval is not meaningful" if n[0] < MIN_SEEDS else ""}.
-Lower is better for σ/μ, abs rel and ATE; higher for δ<1.25.
+Per seed, variant − {variants[0]} (the same seed: the same initial weights and data order). The primary
+metric, declared before the runs, is the mean σ/μ of the weights evaluated (the EMA where the recipe
+keeps one); the others are secondary. Each comparison: the mean difference, its {1 - ALPHA:.0%} Student-t
+interval, the exact two-sided p of the paired sign-flip test (all 2ⁿ sign assignments), that p after
+Holm's correction (over the variants for the primary metric; over all secondary rows together), and the
+minimal detectable effect (MDE) of a paired t-test at α = {ALPHA} with {POWER:.0%} power for the observed
+SD. "lower"/"higher": Holm-corrected p < {ALPHA}; "not shown": not, with the effect this many seeds
+could have shown. The smallest exact p is 2/2ⁿ, so below {MIN_SEEDS} seeds no verdict is possible
+("untestable") and no interval is printed. n = {", ".join(map(str, n))} seeds. Lower is better for σ/μ,
+abs rel and ATE; higher for δ<1.25.
 
 {comparison}{figure}
 ## Figure 1: per-frame scale
