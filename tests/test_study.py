@@ -219,6 +219,26 @@ def test_a_failing_worker_does_not_stop_the_other_lanes(tmp_path, capsys):
     assert record["log"].endswith("study.log") and "FAILED broken seed 0" in capsys.readouterr().out
 
 
+def test_a_spec_pins_the_compute_threads_of_its_runs_and_records_them(tmp_path, monkeypatch):
+    """threads: 1 in a two-thread process: the run computes on one thread, its result says so, and
+    the process gets its threads back. Caught: the key ignored in-process; not restored."""
+    seen, real_train, before = [], runner.train, torch.get_num_threads()
+    monkeypatch.setattr(runner, "train", lambda *a, **k: seen.append(torch.get_num_threads()) or real_train(*a, **k))
+    spec = write_spec(tmp_path / "toy.yaml", variants={"baseline": ["loss.constraints=[]"]}, threads=1)
+    out = tmp_path / "study"
+    torch.set_num_threads(2)
+    try:
+        assert main(["study", "--spec", str(spec), "--out", str(out), "--quiet", "--accelerator", "cpu"]) == 0
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+    result = json.loads((out / "results" / "baseline_seed0.json").read_text())
+    assert seen == [1] and result["environment"]["threads"] == 1
+    assert "compute threads per run: 1, pinned by the spec" in (out / "results.md").read_text()
+    with pytest.raises(PoseconsError, match="threads must be an integer ≥ 1"):
+        load_spec(write_spec(tmp_path / "bad.yaml", threads=0))
+
+
 def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     """The committed results folder holds five seeds of baseline and cyc and other specs' variants;
     a report of two seeds and one variant averages and pairs those alone. Its JSONs predate t_err /

@@ -344,6 +344,7 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
 - data: {_data_line(study["data"])}
 - seeds: {", ".join(map(str, study["seeds"]))} (`train.seed`: the same initial weights and data order for every variant of a seed)
 - code and machine: {code or "–"}
+- compute threads per run: {f"{study['threads']}, pinned by the spec" if study.get("threads") else "not pinned by the spec (each run's count is in its machine above)"}
 - generated: {datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")}
 - runs done: {done} of {runs}{"; missing: " + ", ".join(missing) if missing else ""}{"; untrained missing for seeds " + ", ".join(untrained_missing) if untrained_missing else ""}{failed}
 - weights evaluated: each run's `checkpoints/last.pt`, the last step (no model selection, no ground truth);

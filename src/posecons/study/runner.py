@@ -27,6 +27,7 @@ truth — with frame and per-sequence median scaling, and its pose net on every 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
@@ -206,10 +207,17 @@ def environment(accelerator: str) -> dict[str, str]:
     import torch
 
     # The compute threads, since a study may run several runs side by side at fewer threads each.
-    machine = f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU threads, {torch.get_num_threads()} used"
+    threads = torch.get_num_threads()
+    machine = f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU threads, {threads} used"
     if accelerator != "cpu" and torch.cuda.is_available():
         machine += f", {torch.cuda.get_device_name()}"
-    return {"commit": _commit(), "machine": machine, "python": platform.python_version(), "torch": torch.__version__}
+    return {
+        "commit": _commit(),
+        "machine": machine,
+        "threads": threads,
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+    }
 
 
 def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
@@ -221,7 +229,7 @@ def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
 
 def raw_weights_result(checkpoint: Path, data: StudyData) -> dict[str, Any]:
     """With ``train.ema_decay``, the raw weights of the same step evaluated as the EMA is: the EMA's
-    effect paired on one trajectory (docs/results.md §7). Empty for a checkpoint without an EMA."""
+    effect paired on one trajectory (docs/lab/investigation.md §7). Empty for a checkpoint without an EMA."""
     state = load_checkpoint(checkpoint)
     if "raw_model" not in state:
         return {}
@@ -312,7 +320,7 @@ def _run_side_by_side(
     Returns a line for each run that failed."""
     import torch
 
-    threads = max(1, torch.get_num_threads() // jobs)
+    threads = spec.threads or max(1, torch.get_num_threads() // jobs)
     pending, running, stopped, failed = list(todo), {}, [], []
 
     def forward(signum: int, frame: Any) -> None:
@@ -368,6 +376,18 @@ def _run_side_by_side(
     return failed
 
 
+@contextlib.contextmanager
+def compute_threads(threads: int | None):
+    """torch's compute threads set to ``threads`` (when given) inside the block, restored after it."""
+    previous = torch.get_num_threads()
+    if threads:
+        torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
 def run_study(
     spec: StudySpec,
     out: Path,
@@ -386,44 +406,45 @@ def run_study(
     def refresh() -> None:
         write_report(results, report, spec.describe(), publish)
 
-    env = environment(accelerator)
-    check_writable(out, folder=True)
-    make_dirs(out)
-    with FileLock(out / ".study.lock"):  # one process makes the data and the reference rows
-        data = _prepare(spec, out, env)
-    done = [r for r in spec.runs() if (results / result_name(*r)).is_file()]
-    todo = [r for r in spec.runs() if r not in done]
-    progress = Progress(len(todo))
-    progress.line(f"{len(done)} of {len(spec.runs())} runs done before, {len(todo)} to go")
+    with compute_threads(spec.threads):  # the reference rows and in-process runs
+        env = environment(accelerator)
+        check_writable(out, folder=True)
+        make_dirs(out)
+        with FileLock(out / ".study.lock"):  # one process makes the data and the reference rows
+            data = _prepare(spec, out, env)
+        done = [r for r in spec.runs() if (results / result_name(*r)).is_file()]
+        todo = [r for r in spec.runs() if r not in done]
+        progress = Progress(len(todo))
+        progress.line(f"{len(done)} of {len(spec.runs())} runs done before, {len(todo)} to go")
 
-    failed = _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh) if jobs > 1 else []
-    for variant, seed in todo if jobs == 1 else []:
-        if progress.taken(out, variant, seed):
-            continue
-        run_dir = out / "runs" / variant / f"seed{seed}"
-        progress.line(f"start {variant} seed {seed} → {run_dir} ({progress.left} runs left)")
-        started = time.monotonic()
-        try:
-            result = train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env)
-        except Interrupted:
-            raise
-        except Exception as exc:  # the next run goes on; the record keeps the error and its traceback
-            error = "".join(traceback.format_exception_only(exc)).strip().splitlines()[-1]
-            log = out / "results" / FAILED / f"{variant}_seed{seed}.log"
-            write_text(log, "".join(traceback.format_exception(exc)))
-            failed.append(record_failure(out, variant, seed, error, log))
-            progress.failed(variant, seed, error)
-            continue
-        progress.done(result, started)
-        refresh()
-    if progress.skipped or failed or not todo:  # else the last run's refresh wrote it
-        refresh()
-    if failed:
-        raise RunsFailed(
-            f"{len(failed)} of {len(todo)} runs failed (the others finished; run the same command again to "
-            "retry them): " + "; ".join(failed)
-        )
-    return len(todo) - progress.skipped
+        failed = _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh) if jobs > 1 else []
+        for variant, seed in todo if jobs == 1 else []:
+            if progress.taken(out, variant, seed):
+                continue
+            run_dir = out / "runs" / variant / f"seed{seed}"
+            progress.line(f"start {variant} seed {seed} → {run_dir} ({progress.left} runs left)")
+            started = time.monotonic()
+            try:
+                result = train_and_evaluate(spec, data, out, variant, seed, accelerator, quiet, env)
+            except Interrupted:
+                raise
+            except Exception as exc:  # the next run goes on; the record keeps the error and its traceback
+                error = "".join(traceback.format_exception_only(exc)).strip().splitlines()[-1]
+                log = out / "results" / FAILED / f"{variant}_seed{seed}.log"
+                write_text(log, "".join(traceback.format_exception(exc)))
+                failed.append(record_failure(out, variant, seed, error, log))
+                progress.failed(variant, seed, error)
+                continue
+            progress.done(result, started)
+            refresh()
+        if progress.skipped or failed or not todo:  # else the last run's refresh wrote it
+            refresh()
+        if failed:
+            raise RunsFailed(
+                f"{len(failed)} of {len(todo)} runs failed (the others finished; run the same command again to "
+                "retry them): " + "; ".join(failed)
+            )
+        return len(todo) - progress.skipped
 
 
 def _prepare(spec: StudySpec, out: Path, env: dict[str, str]) -> StudyData:

@@ -11,6 +11,8 @@ data:                               # either synth (generated once into OUT/data
 #   odometry: /data/kitti_odometry    # optional (--odometry-path): the pose table
 #   odometry_sequences: [9, 10]
 seeds: [0, 1, 2]                    # train.seed of the runs
+threads: 1                          # optional: the compute threads of every run (the outcome depends on
+                                    # them as much as on the seed); unset, a run gets the process's share
 variants:                           # the first is the reference of the paired differences
   baseline: ["loss.constraints=[]"]
   cyc: ["loss.constraints=[cyc]"]
@@ -33,7 +35,7 @@ import yaml
 from ..config import STUDY_SPECS, Config, load_config, resolve_preset
 from ..errors import PoseconsError
 
-KEYS = {"preset", "overrides", "data", "seeds", "variants"}
+KEYS = {"preset", "overrides", "data", "seeds", "variants", "threads"}
 SYNTH_ARGS = ("drives", "frames", "width", "height", "neighbours", "seed", "ext")  # generate_synth's; ext optional
 PATH_KEYS = {"path", "test_split", "odometry", "odometry_sequences"}
 UNTRAINED = "untrained"  # the name of the reference row: no variant may take it
@@ -50,6 +52,7 @@ class StudySpec:
     data: dict[str, Any]  # {"synth": {...generate_synth arguments}} or {"path", "test_split", "odometry", ...}
     seeds: list[int]
     variants: dict[str, list[str]]
+    threads: int | None = None  # compute threads of every run; None: the process's share
 
     @property
     def reference(self) -> str:
@@ -90,6 +93,7 @@ class StudySpec:
             "seeds": self.seeds,
             "variants": self.variants,
             "reference": self.reference,
+            "threads": self.threads,
         }
 
 
@@ -196,6 +200,12 @@ def _seeds(seeds: Any) -> list[int]:
     return seeds
 
 
+def _threads(threads: Any) -> int | None:
+    if threads is not None and (type(threads) is not int or threads < 1):
+        raise PoseconsError(f"threads must be an integer ≥ 1, got {threads!r}")
+    return threads
+
+
 def _variants(variants: Any) -> dict[str, list[str]]:
     if not isinstance(variants, dict) or not variants:
         raise PoseconsError(f"variants must be a non-empty mapping of name → overrides, got {variants!r}")
@@ -240,6 +250,7 @@ def load_spec(name: str | Path, data_path: Path | None = None, odometry_path: Pa
             data=_data(raw["data"], file.parent, data_path, odometry_path),
             seeds=_seeds(raw["seeds"]),
             variants=_variants(raw["variants"]),
+            threads=_threads(raw.get("threads")),
         )
         for variant in spec.variants:
             if any(o.split("=", 1)[0].strip() == "train.seed" for o in spec.run_overrides(variant, 0)[:-1]):
