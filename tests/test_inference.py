@@ -331,6 +331,31 @@ class PlanePredictor(Predictor):
         return torch.from_numpy(np.repeat(disp[None, None], len(images), 0).astype(np.float32))
 
 
+class ApproachingWallPredictor(Predictor):
+    """A wall whose disparity grows by a fifth of its first value each frame, a nearer stripe on it."""
+
+    name, height, width, has_pose = "wall", 32, 48, False
+    calls = 0
+
+    def disparity(self, images: np.ndarray) -> torch.Tensor:
+        out = []
+        for _ in images:
+            disp = np.full((self.height, self.width), 0.1 * (1 + 0.2 * self.calls), np.float32)
+            disp[:, :8] *= 4
+            out.append(disp[None])
+            self.calls += 1
+        return torch.from_numpy(np.stack(out))
+
+
+def test_colour_range_is_one_for_the_sequence(frames_dir, tmp_path):
+    """A wall that comes closer each frame gets another colour in each frame of the first batch, whose
+    range colours the sequence; per-frame normalisation (the flicker users saw) paints them all alike. Caught by mutation:
+    colour_range of each frame."""
+    predict(ApproachingWallPredictor(), frames_dir, tmp_path / "out", PredictOptions(batch_size=4, progress=False))
+    colours = [np.asarray(Image.open(p))[:, -1] for p in sorted((tmp_path / "out" / "depth_color").glob("*.png"))]
+    assert len(colours) >= 4 and all(not np.array_equal(a, b) for a, b in zip(colours[:4], colours[1:4]))
+
+
 def test_camera_height_calibration_in_predict(frames_dir, tmp_path):
     """Frames of any size: K (normalised KITTI default) is scaled to the original image."""
     summary = predict(

@@ -54,6 +54,7 @@ positive_float = _number(float, lambda v: v > 0, "a number > 0")
 non_negative_float = _number(float, lambda v: v >= 0, "a number ≥ 0")
 finite_float = _number(float, lambda v: True, "a finite number")
 fraction = _number(float, lambda v: 0 <= v <= 1, "a number in [0, 1]")
+field_of_view = _number(float, lambda v: 1 <= v <= 170, "a field of view in degrees, 1–170")
 
 
 def device_name(text: str) -> str:

@@ -199,10 +199,17 @@ def plot_validation(rows: Sequence[dict], path: str | Path) -> Path:
     return _save(fig, path)
 
 
-def colorize(disparity: np.ndarray, cmap: str = COLORMAP) -> np.ndarray:
-    """(H, W) disparity → (H, W, 3) uint8, normalised per frame to [min, 95th percentile] so a few
-    very near pixels do not wash out the rest."""
-    lo, hi = float(disparity.min()), float(np.percentile(disparity, 95))
+def colour_range(disparity: np.ndarray) -> tuple[float, float]:
+    """[min, 95th percentile] of a disparity map (or a stack of them): a few very near pixels do not
+    wash out the rest."""
+    return float(disparity.min()), float(np.percentile(disparity, 95))
+
+
+def colorize(disparity: np.ndarray, cmap: str = COLORMAP, limits: tuple[float, float] | None = None) -> np.ndarray:
+    """(H, W) disparity → (H, W, 3) uint8 over ``limits`` (default: :func:`colour_range` of this
+    frame). A sequence passes one range for all frames, so that colours do not flicker between frames
+    and a change of scale shows as one."""
+    lo, hi = limits or colour_range(disparity)
     norm = np.clip((disparity - lo) / max(hi - lo, 1e-12), 0, 1)
     return (matplotlib.colormaps[cmap](norm)[..., :3] * 255).astype(np.uint8)
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..cli import (
     add_overrides,
+    field_of_view,
     finite_float,
     fraction,
     non_negative_int,
@@ -16,6 +18,8 @@ from ..cli import (
     positive_int,
 )
 from ..errors import PoseconsError
+
+GUESS_FOV = 60.0  # degrees: a typical dashcam's horizontal field of view (50–70°), when none is given
 
 # The library modules are imported inside each command: `posecons --help` must not pay for torch or av.
 
@@ -74,6 +78,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             help="intrinsics in pixels of the input frames",
         )
     p.add_argument("--calib", type=Path, help="file with 'K: 9 numbers', 'P_rect_02:' or 'P2:' instead")
+    p.add_argument(
+        "--fov",
+        type=field_of_view,
+        help=f"or the horizontal field of view in degrees (fx = fy from it, centred principal point); "
+        f"with none of these, {GUESS_FOV:g}° is assumed, with a warning",
+    )
+    p.add_argument(
+        "--every",
+        type=positive_int,
+        default=1,
+        help="keep one decoded frame in N (default 1): 25–30 fps video wants 2–3 to train at about 10 Hz",
+    )
     p.add_argument("--width", type=positive_int, help="resize frames to this width in pixels (default: keep)")
     p.add_argument("--height", type=positive_int, help="resize frames to this height in pixels (default: keep)")
     p.add_argument(
@@ -143,16 +159,28 @@ def _prepare(args: argparse.Namespace) -> int:
     from .prepare import prepare
 
     given = [getattr(args, n) for n in ("fx", "fy", "cx", "cy")]
+    sources = ["--fx --fy --cx --cy" if any(v is not None for v in given) else "", "--calib" * (args.calib is not None)]
+    sources = [s for s in sources + ["--fov" * (args.fov is not None)] if s]
+    if len(sources) > 1:
+        raise PoseconsError(f"give one of --fx --fy --cx --cy, --calib and --fov, not {' and '.join(sources)}")
+    k, fov = None, args.fov
     if args.calib is not None:
-        if any(v is not None for v in given):
-            raise PoseconsError("give either --fx --fy --cx --cy or --calib, not both")
         k = read_calib_intrinsics(args.calib)
-    elif all(v is not None for v in given):
+    elif any(v is not None for v in given):
+        if not all(v is not None for v in given):
+            raise PoseconsError("--fx --fy --cx --cy: give all four (pixels), or --fov DEGREES")
         fx, fy, cx, cy = given
         k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
-    else:
-        raise PoseconsError("intrinsics needed: --fx --fy --cx --cy (pixels) or --calib FILE")
-    info = prepare(args.input, args.out, k, args.width, args.height, args.static_threshold)
+    elif fov is None:
+        fov = GUESS_FOV
+    info = prepare(args.input, args.out, k, args.width, args.height, args.static_threshold, fov=fov, every=args.every)
+    if not sources:  # after the work, so that it is the last thing the user reads
+        print(
+            f"posecons prepare: warning: no intrinsics given, so a {GUESS_FOV:g}° horizontal field of view "
+            f"was assumed (fx = fy = {info['K'][0, 0]:.1f} px at the input size); depth and motion are "
+            "only as right as that guess: pass --fov or --fx --fy --cx --cy when you know them",
+            file=sys.stderr,
+        )
     print(
         f"wrote {len(info['drives'])} drives ({sum(info['frames'])} frames; {info['train']} train / {info['val']} val lines) to {args.out}"
     )

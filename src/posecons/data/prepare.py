@@ -4,11 +4,15 @@ Each input becomes one drive ``custom/custom_drive_NNNN_sync/image_02/data/<fram
 ``custom/calib_cam_to_cam.txt`` holds the given intrinsics as ``P_rect_02``/``S_rect_02`` (scaled
 to the written size), and ``splits/custom/{train,val}_files.txt`` list every frame with both
 neighbours, so :class:`~posecons.data.kitti_raw.KittiRawDataset` reads the result directly.
-Frames that hardly differ from the previous kept frame (a standing camera) are dropped.
+Frames that hardly differ from the previous kept frame (a standing camera) are dropped; ``every``
+keeps one decoded frame in N first (25–30 fps video has too little motion between frames for this
+kind of training, which wants about 10 Hz). Without a calibration, a horizontal field of view gives
+the intrinsics: fx = fy = (W/2)/tan(fov/2), the principal point in the centre.
 """
 
 from __future__ import annotations
 
+import math
 import random
 from collections.abc import Iterator
 from pathlib import Path
@@ -54,22 +58,35 @@ def _signature(img: Image.Image) -> np.ndarray:
     return np.asarray(img.convert("L").resize((64, 48), Image.BILINEAR), dtype=np.float32) / 255.0
 
 
+def fov_intrinsics(fov_degrees: float, width: int, height: int) -> np.ndarray:
+    """The pixel K of a ``width`` × ``height`` pinhole camera with that horizontal field of view,
+    square pixels and the principal point in the centre."""
+    f = width / 2 / math.tan(math.radians(fov_degrees) / 2)
+    return np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], dtype=np.float64)
+
+
 def prepare(
     inputs: list[Path],
     out: Path,
-    intrinsics: np.ndarray,
+    intrinsics: Optional[np.ndarray] = None,
     width: Optional[int] = None,
     height: Optional[int] = None,
     static_threshold: float = 0.01,
     val_fraction: float = 0.1,
     seed: int = 0,
+    fov: Optional[float] = None,
+    every: int = 1,
 ) -> dict:
-    """Write the dataset; ``intrinsics`` is the (3, 3) pixel K of the inputs' native size.
+    """Write the dataset; ``intrinsics`` is the (3, 3) pixel K of the inputs' native size, or else
+    ``fov`` the horizontal field of view in degrees.
 
-    A frame is kept when its mean absolute grey difference to the last kept frame is at least
-    ``static_threshold``. All inputs must share one native size (one calibration per dataset).
-    Returns {"drives": [...], "frames": [...], "train": n, "val": n}.
+    Of the decoded frames every ``every``-th is considered; one is kept when its mean absolute grey
+    difference to the last kept frame is at least ``static_threshold``. All inputs must share one
+    native size (one calibration per dataset).
+    Returns {"drives": [...], "frames": [...], "train": n, "val": n, "K": native K}.
     """
+    if (intrinsics is None) == (fov is None):
+        raise ValueError("give exactly one of intrinsics and fov")
     if not inputs:
         raise PoseconsError("prepare: no inputs given")
     lines, counts, native = [], [], None
@@ -79,7 +96,9 @@ def prepare(
             data = tmp / folder / "image_02" / "data"
             data.mkdir(parents=True)
             kept, last = 0, None
-            for img in iter_frames(source):
+            for decoded, img in enumerate(iter_frames(source)):
+                if decoded % every:
+                    continue
                 if native is None:
                     native = img.size
                 if img.size != native:
@@ -98,7 +117,8 @@ def prepare(
             lines += [SplitLine(folder, f, "l") for f in range(1, kept - 1)]
             counts.append(kept)
         size = (width or native[0], height or native[1])
-        k = np.array(intrinsics, dtype=np.float64)
+        native_k = fov_intrinsics(fov, *native) if intrinsics is None else np.array(intrinsics, dtype=np.float64)
+        k = native_k.copy()
         k[0] *= size[0] / native[0]
         k[1] *= size[1] / native[1]
         p_rect = np.concatenate([k, np.zeros((3, 1))], axis=1)
@@ -113,4 +133,5 @@ def prepare(
         "frames": counts,
         "train": len(lines) - n_val,
         "val": n_val,
+        "K": native_k,
     }

@@ -10,7 +10,7 @@ Output layout (``<name>`` is the image stem, or the 6-digit frame index of a vid
 
     OUT/depth/<name>.npy         float32 (H, W) depth at the original size, scaled
     OUT/depth_png/<name>.png     uint16 depth × 256 (KITTI style, 0 = invalid)
-    OUT/depth_color/<name>.png   colour-mapped disparity
+    OUT/depth_color/<name>.png   colour-mapped disparity (one colour range for the sequence)
     OUT/pointcloud/<name>.ply    with pointcloud=True, every k-th frame
     OUT/video.mp4                video input: input | depth side by side
     OUT/trajectory_kitti.txt, trajectory_tum.txt, trajectory.png   camera → world poses
@@ -36,7 +36,7 @@ from ..errors import PoseconsError
 from ..fileio import output_dir
 from ..metrics.depth import drift_stats, frame_scale, resize_disparity, valid_mask
 from ..metrics.pose import global_from_relative
-from ..plots import colorize, plot_scale_drift, plot_trajectory_topview
+from ..plots import colorize, colour_range, plot_scale_drift, plot_trajectory_topview
 from . import scale as scaling
 from .backend import Predictor, StepChain, predict_batches
 from .camera import resolve_intrinsics
@@ -118,11 +118,11 @@ def calibrate(
     return scaling.combine("camera_height", names, scales, "no ground plane found")
 
 
-def _write_depth(out: Path, frame: Frame, depth: np.ndarray, disparity: np.ndarray) -> np.ndarray:
+def _write_depth(out: Path, frame: Frame, depth: np.ndarray, limits: tuple[float, float]) -> np.ndarray:
     np.save(out / "depth" / f"{frame.name}.npy", depth.astype(np.float32))
     png = np.clip(np.round(depth * 256), 0, 65535).astype(np.uint16)
     Image.fromarray(png).save(out / "depth_png" / f"{frame.name}.png")
-    color = colorize(disparity)
+    color = colorize(1.0 / depth, limits=limits)
     Image.fromarray(color).save(out / "depth_color" / f"{frame.name}.png")
     return color
 
@@ -148,14 +148,16 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
         for name in folders:
             (tmp / name).mkdir()
         writer = SideBySideWriter(tmp / "video.mp4", fps) if source.is_video and options.video else None
-        chain, times, drift, count = StepChain(predictor), [], [], 0
+        chain, times, drift, count, limits = StepChain(predictor), [], [], 0, None
         bar = tqdm(total=len(source) or None, unit="frame", disable=not options.progress)
         for frames, images, disps in predict_batches(predictor, source, options.batch_size):
             if do_pose:
                 chain.add(images)
-            for frame, disp in zip(frames, disps):
-                depth = full_size_depth(disp, *frame.size) * np.float32(s)
-                color = _write_depth(tmp, frame, depth, 1.0 / depth)
+            depths = [full_size_depth(disp, *frame.size) * np.float32(s) for frame, disp in zip(frames, disps)]
+            if limits is None:  # one colour range for the sequence, from its first batch: no flicker
+                limits = colour_range(np.concatenate([1.0 / d.ravel() for d in depths]))
+            for frame, disp, depth in zip(frames, disps, depths):
+                color = _write_depth(tmp, frame, depth, limits)
                 if writer is not None:
                     writer.write(frame.image, color)
                 if options.pointcloud and frame.index % options.every == 0:
