@@ -168,7 +168,8 @@ CASES = [
         "prepare --input {in}/garbage.mp4 --out {out} --fx 1 --fy 1 --cx 1 --cy 1",
         ["garbage.mp4", "video"],
     ),
-    ("prepare-no-intrinsics", "prepare --input {in}/frames --out {out}", ["intrinsics needed"]),
+    ("prepare-fx-only", "prepare --input {in}/frames --out {out} --fx 100", ["--fx --fy --cx --cy: give all four"]),
+    ("prepare-fov-180", "prepare --input {in}/frames --out {out} --fov 180", ["--fov", "1–170"]),
     ("prepare-fx-nan", "prepare --input {in}/frames --out {out} --fx nan --fy 1 --cx 1 --cy 1", ["--fx", "> 0"]),
     (
         "prepare-calib-nan",
@@ -178,7 +179,7 @@ CASES = [
     (
         "prepare-both-intrinsics",
         "prepare --input {in}/frames --out {out} --calib {in}/nan_calib.txt --fx 1 --fy 1 --cx 1 --cy 1",
-        ["not both"],
+        ["not --fx --fy --cx --cy and --calib"],
     ),
     (
         "prepare-out-under-file",
