@@ -6,7 +6,7 @@ import math
 import torch
 
 from posecons.geometry import axis_angle_to_matrix, backproject, make_pose
-from posecons.inference.stabilise import relative_scale, stabilise
+from posecons.inference.stabilise import StreamStabiliser, relative_scale, stabilise
 
 H, W = 48, 64
 K = torch.tensor([[40.0, 0, 31.5], [0, 40.0, 23.5], [0, 0, 1]], dtype=torch.float64)
@@ -60,3 +60,19 @@ def test_no_jitter_changes_nothing():
     the co-visibility mask does NOT fail here (too few pixels leave the view) — a gap."""
     depths, steps = _scene()
     assert max(abs(f - 1) for f in stabilise(depths, steps, K)) < 1e-3
+
+
+def test_streaming_in_batches_equals_the_whole_sequence():
+    """predict feeds the stabiliser batch by batch: batches of 1, 3 and 5 frames give the factors of
+    the whole sequence at once. Mutations checked: the previous depth not carried across batches
+    (a batch's first factor 1) fails; the step index off by one fails."""
+    depths, steps = _scene()
+    g = torch.Generator().manual_seed(1)
+    noisy = depths * torch.exp(0.1 * torch.randn(len(depths), generator=g, dtype=torch.float64))[:, None, None]
+    whole = stabilise(noisy, steps, K)
+    for size in (1, 3, 5):
+        stream, streamed = StreamStabiliser(K), []
+        for start in range(0, len(noisy), size):
+            first_step = max(start - 1, 0)
+            streamed += stream.add(noisy[start : start + size], steps[first_step : start + size - 1])
+        assert streamed == whole

@@ -5,19 +5,23 @@ the metrics of :mod:`posecons.metrics` with their provenance → JSON, plots and
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import torch
 
+from ..data.calib import normalised_to_pixel, raw_intrinsics
 from ..data.gt import load_gt
 from ..data.kitti_odometry import list_sequence_frames
 from ..data.kitti_raw import split_image_paths
-from ..data.splits import SplitLine, SplitSource, read_split
+from ..data.splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
 from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
 from ..inference.io import frames_from_paths
+from ..inference.stabilise import DEFAULT_TIME_CONSTANT, stabilise
 from ..metrics.depth import CROP_FOR_GT_KIND, evaluate_depth
 from ..metrics.pose import align_trajectory, evaluate_pose, global_from_relative
 from ..plots import plot_error_histogram, plot_scale_boxplot, plot_scale_over_time, plot_trajectory_topview
@@ -40,6 +44,35 @@ def model_steps(predictor: Predictor, paths: Sequence[Path], batch_size: int = 8
     for _, images, _ in predict_batches(predictor, frames_from_paths(paths), batch_size, depth=False):
         chain.add(images)
     return chain.steps()
+
+
+def stabilised_disparities(
+    predictor: Predictor,
+    data_path: str | Path,
+    split: SplitSource,
+    disps: np.ndarray,
+    time_constant: float = DEFAULT_TIME_CONSTANT,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The split's (N, h, w) network disparities ``disps`` divided by the test-time stabiliser's
+    factors (SPEC §12: from the network's own depths and pose-net steps, no ground truth), sequence by
+    sequence; → (disparities, (N,) factors). Each sequence's lines must be consecutive frames in order,
+    as in the synthetic test split (the stabiliser compares neighbouring frames)."""
+    lines, paths = read_split(split), split_image_paths(data_path, split)
+    factors = np.ones(len(lines))
+    for _, group in itertools.groupby(range(len(lines)), key=lambda i: (lines[i].folder, lines[i].side)):
+        index = list(group)
+        frames = [lines[i].frame for i in index]
+        if frames != list(range(frames[0], frames[0] + len(frames))):
+            raise PoseconsError(f"{lines[index[0]].where}: stabilising needs consecutive frames of a sequence in order")
+        if len(index) < 2:
+            continue
+        line = lines[index[0]]
+        date_dir = Path(data_path) / Path(line.folder).parent
+        K = normalised_to_pixel(raw_intrinsics(date_dir, SIDE_TO_CAMERA[line.side]), *disps.shape[1:])
+        steps = model_steps(predictor, [paths[i] for i in index])
+        depths = torch.from_numpy(1.0 / disps[index].astype(np.float64))
+        factors[index] = stabilise(depths, torch.from_numpy(steps), torch.from_numpy(K), time_constant)
+    return (disps / factors[:, None, None]).astype(disps.dtype), factors
 
 
 def load_pred_disps(path: Path) -> np.ndarray:
@@ -119,13 +152,30 @@ def segments_note(result: dict) -> str:
 
 
 def checkpoint_depth(
-    checkpoint: Path, data_path: Path, split: Sequence[SplitLine], gt_path: Path, scalings: Sequence[str] = ("frame",)
+    checkpoint: Path,
+    data_path: Path,
+    split: Sequence[SplitLine],
+    gt_path: Path,
+    scalings: Sequence[str] = ("frame",),
+    stabilised: bool = False,
 ) -> dict[str, dict]:
     """{scaling: :func:`depth_result`} of a checkpoint's disparities (predicted once) on the ``split``
-    lines against the LiDAR ground truth exported to ``gt_path``."""
+    lines against the LiDAR ground truth exported to ``gt_path``; with ``stabilised`` also
+    {"<scaling>_stabilised": ...} of the same disparities after :func:`stabilised_disparities`, whose
+    ``stabiliser_factors`` it records."""
     gts, _ = load_gt(gt_path)
-    disps = model_disparities(load_predictor(checkpoint, "auto"), data_path, split)
-    return {s: depth_result(disps, gts, split, s, pred_name=str(checkpoint), gt_name=str(gt_path)) for s in scalings}
+    predictor = load_predictor(checkpoint, "auto")
+    runs = {"": model_disparities(predictor, data_path, split)}
+    if stabilised:
+        runs["_stabilised"], factors = stabilised_disparities(predictor, data_path, split, runs[""])
+    results = {
+        s + suffix: depth_result(disps, gts, split, s, pred_name=str(checkpoint), gt_name=str(gt_path))
+        for suffix, disps in runs.items()
+        for s in scalings
+    }
+    for s in scalings if stabilised else ():
+        results[s + "_stabilised"]["stabiliser_factors"] = factors.tolist()
+    return results
 
 
 def checkpoint_pose(checkpoint: Path, odometry: Path, sequence: str, out_dir: Path | None = None) -> dict:

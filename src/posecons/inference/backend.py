@@ -172,12 +172,14 @@ class StepChain:
         self.previous: np.ndarray | None = None
         self.parts: list[np.ndarray] = []
 
-    def add(self, images: np.ndarray) -> None:
-        """The next (B, 3, h, w) network images of the sequence."""
+    def add(self, images: np.ndarray) -> np.ndarray:
+        """The next (B, 3, h, w) network images of the sequence → the steps into them (B − 1 for the
+        first batch, B after it)."""
         a = images[:-1] if self.previous is None else np.concatenate([self.previous, images[:-1]])
-        if len(a):
-            self.parts.append(self.predictor.pose(a, images[len(images) - len(a) :]))
+        steps = self.predictor.pose(a, images[len(images) - len(a) :]) if len(a) else np.zeros((0, 4, 4))
+        self.parts.append(steps)
         self.previous = images[-1:]
+        return steps
 
     def steps(self) -> np.ndarray:
         """(N−1, 4, 4) float64 steps of the N frames added so far."""

@@ -61,10 +61,31 @@ class ScaleFilter:
         return math.exp(self.log_scale)
 
 
+class StreamStabiliser:
+    """Factors for frames that arrive in batches (``predict`` streams): each frame's depth is compared
+    with the previous frame's, across batch boundaries, and the ratios chained by :class:`ScaleFilter`.
+    The first frame's factor is 1."""
+
+    def __init__(self, K: torch.Tensor, time_constant: float = DEFAULT_TIME_CONSTANT):
+        self.K = K
+        self.chain = ScaleFilter(time_constant)
+        self.previous: torch.Tensor | None = None
+
+    def add(self, depths: torch.Tensor, steps: torch.Tensor) -> list[float]:
+        """(B, H, W) next depths and the steps T_{i+1←i} into each of them that has a predecessor
+        (B − 1 for the first batch, B after it) → their B factors."""
+        first = self.previous is None
+        check_tensor("steps", steps, (depths.shape[0] - first, 4, 4))
+        factors, previous = ([1.0], depths[0]) if first else ([], self.previous)
+        for depth, T in zip(depths[first:], steps):
+            factors.append(self.chain.step(relative_scale(previous, depth, T, self.K)))
+            previous = depth
+        self.previous = depths[-1]
+        return factors
+
+
 def stabilise(
     depths: torch.Tensor, poses: torch.Tensor, K: torch.Tensor, time_constant: float = DEFAULT_TIME_CONSTANT
 ) -> list[float]:
     """(N, H, W) depths, (N−1, 4, 4) steps T_{i+1←i} and pixel K (3, 3) → N factors (the first 1)."""
-    check_tensor("poses", poses, (depths.shape[0] - 1, 4, 4))
-    chain = ScaleFilter(time_constant)
-    return [1.0] + [chain.step(relative_scale(depths[i], depths[i + 1], poses[i], K)) for i in range(len(poses))]
+    return StreamStabiliser(K, time_constant).add(depths, poses)
