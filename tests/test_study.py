@@ -359,9 +359,11 @@ def test_jobs_run_side_by_side_in_worker_processes_and_pass_a_signal_on(tmp_path
     assert "runs done: 2 of 2" in (out / "results.md").read_text()
     assert capsys.readouterr().out.count("] done ") == 2
 
-    # SIGTERM to the study while both runs train: each saves its state and stops (long before its 400th
-    # step: a signal not passed on would let both finish), and the study says how to go on.
-    slow = write_spec(tmp_path / "slow.yaml", overrides=[*TINY[:1], "train.max_steps=400", *TINY[2:]])
+    # SIGTERM to the study while both runs of seed 0 train: each saves its state and stops (long before
+    # its 400th step: a signal not passed on would let both finish), seed 1's runs never start (the study
+    # used to wait for them forever), and the study says how to go on.
+    slow_overrides = [*TINY[:1], "train.max_steps=400", *TINY[2:]]
+    slow = write_spec(tmp_path / "slow.yaml", overrides=slow_overrides, seeds=[0, 1])
     out = tmp_path / "slow"
     started = out / "runs" / "cyc" / "seed0" / "config.yaml"
 
@@ -378,3 +380,4 @@ def test_jobs_run_side_by_side_in_worker_processes_and_pass_a_signal_on(tmp_path
     for variant in ("baseline", "cyc"):
         assert load_checkpoint(out / "runs" / variant / "seed0" / "checkpoints" / "last.pt")["step"] >= 1
         assert not (out / "results" / f"{variant}_seed0.json").exists()
+        assert not (out / "runs" / variant / "seed1").exists()

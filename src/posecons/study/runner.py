@@ -330,7 +330,7 @@ def _run_side_by_side(
 
     previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        while pending or running:
+        while running or (pending and not stopped):
             while pending and len(running) < jobs and not stopped:
                 variant, seed = pending.pop(0)
                 if progress.taken(out, variant, seed):
