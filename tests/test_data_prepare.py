@@ -147,3 +147,14 @@ def test_prepare_intrinsics_options_refuse_bad_combinations(tmp_path: Path, caps
     except SystemExit as exc:  # argparse's usage error
         code = exc.code
     assert code == 2 and message in capsys.readouterr().err and not (tmp_path / "data").exists()
+
+
+def test_static_threshold_default_is_one_number():
+    """The command's default is the library's (two copies of 0.01 once dropped half of a highway clip)."""
+    import inspect
+
+    from posecons.cli import build_parser
+    from posecons.data.prepare import prepare
+
+    args = build_parser().parse_args(["prepare", "--input", "x.mp4", "--out", "o"])
+    assert args.static_threshold == inspect.signature(prepare).parameters["static_threshold"].default

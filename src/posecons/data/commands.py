@@ -95,8 +95,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--static-threshold",
         type=fraction,
-        default=0.01,
-        help="drop frames whose mean grey difference (0–1 scale) to the last kept one is below this",
+        default=0.004,
+        help="drop frames whose mean grey difference (0–1 scale) to the last kept one is below this "
+        "(default 0.004: a standing camera; highway video at 12.5 fps differs by 0.006–0.017)",
     )
     p.set_defaults(func=_prepare)
 

@@ -71,7 +71,7 @@ def prepare(
     intrinsics: Optional[np.ndarray] = None,
     width: Optional[int] = None,
     height: Optional[int] = None,
-    static_threshold: float = 0.01,
+    static_threshold: float = 0.004,
     val_fraction: float = 0.1,
     seed: int = 0,
     fov: Optional[float] = None,
