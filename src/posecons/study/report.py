@@ -333,7 +333,8 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
                 ", ".join(f"`{o}`" for o in study["variants"][v]) or "–",
                 str(sum(r["variant"] == v for r in trained)),
                 cell([r["steps"] for r in trained if r["variant"] == v], ".0f"),
-                cell([r["train_minutes"] for r in trained if r["variant"] == v], ".1f"),
+                # a result evaluated from weights kept at a step of a longer run has no time of its own
+                cell([r["train_minutes"] for r in trained if r["variant"] == v and "train_minutes" in r], ".1f"),
             ]
             for v in variants
         ],
