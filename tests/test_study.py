@@ -19,7 +19,7 @@ from posecons.checkpoint import load_checkpoint
 from posecons.cli import main
 from posecons.config import load_config, preset_names, resolve_preset
 from posecons.errors import PoseconsError
-from posecons.study import runner
+from posecons.study import report, runner
 from posecons.study.spec import load_spec
 from posecons.training.trainer import Trainer, save_initial_weights
 
@@ -255,6 +255,46 @@ def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     assert "| **mean σ/μ** (primary) | cyc | 2 |" in text and "| renderer_depth | 1 |" in text
     assert "cyc_temporal" not in text and "| id |" not in text
     assert "| t_err (%) | r_err (°/100 m) |" in text and "| 163.95 ± 48.79 | 4.98 ± 0.41 |" in text  # untrained, 06
+
+
+def test_runs_are_paired_only_with_a_reference_run_that_computed_alike():
+    """A seed's runs on another CPU kind, thread count or GPU than the reference's run of that seed
+    are left out of the pairs and named; results that predate the records pair only with each other.
+    Caught: the CPU kind, the threads read from the machine line or the GPU ignored."""
+
+    def result(variant, seed, cv, machine="Linux x86_64, 2 CPU threads, 1 used", **env):
+        depth = {"scale_cv": cv, "abs_rel": 0.2, "a1": 0.7}
+        environment = {"machine": machine, **env}
+        return {
+            "variant": variant,
+            "seed": seed,
+            "depth": {"frame": depth, "sequence": depth},
+            "environment": environment,
+        }
+
+    results = [result("baseline", s, 0.08, cpu="AVX512") for s in range(7)]
+    results += [result("fb", s, 0.07, cpu="AVX2" if s == 4 else "AVX512") for s in range(7)]
+    results += [result("baseline", 7, 0.08, machine="Linux x86_64, 2 CPU threads")]  # before threads were kept
+    results += [result("fb", 7, 0.07, cpu="AVX512")]
+    results += [
+        result("baseline", s, 0.08, machine="Linux x86_64, 16 CPU threads, 8 used, NVIDIA H200") for s in (8, 9)
+    ]
+    results += [result("fb", 8, 0.07, machine="Linux x86_64, 16 CPU threads, 8 used, NVIDIA A100")]
+    results += [result("fb", 9, 0.07, machine="Linux x86_64, 16 CPU threads, 8 used, NVIDIA H200")]
+    results += [
+        result("baseline", 10, 0.08, cpu="AVX2"),
+        result("fb", 10, 0.07, "Linux x86_64, 2 CPU threads, 2 used", cpu="AVX2"),
+    ]
+    primary = next(r for r in report.paired_rows(["baseline", "fb"], results) if r["primary"])
+    assert primary["n"] == 7 and primary["mean"] == pytest.approx(-0.01)  # seeds 0–3, 5, 6 and 9
+    left_out = "; ".join(report.pair_alike(["baseline", "fb"], results)[1])
+    assert "fb seed 4 (1 thread(s), CPU AVX2; baseline: 1 thread(s), CPU AVX512)" in left_out
+    assert "fb seed 7 (1 thread(s), CPU AVX512; baseline: unrecorded thread(s), CPU unrecorded)" in left_out
+    assert (
+        "fb seed 8 (8 thread(s), CPU unrecorded, NVIDIA A100; baseline: 8 thread(s), CPU unrecorded, NVIDIA H200)"
+        in left_out
+    )
+    assert "fb seed 10 (2 thread(s), CPU AVX2; baseline: 1 thread(s), CPU AVX2)" in left_out
 
 
 def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp_path):

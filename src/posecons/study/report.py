@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 from collections.abc import Callable, Sequence
 from datetime import datetime
@@ -194,14 +195,46 @@ def paired_metrics(results: Sequence[dict]) -> list[tuple[str, Getter, str]]:
     return metrics
 
 
+def run_kind(result: dict) -> str:
+    """How a run computed, beside its seed: its compute threads and its processor. A run's
+    trajectory depends on both as much as on its seed (another thread count, or AVX2 kernels in place
+    of AVX-512 ones, rounds differently from the first step on), so a run is paired only with a
+    reference run of its own kind. Results written before a field was recorded say so."""
+    env = result.get("environment", {})
+    machine = env.get("machine", "")
+    used = re.search(r"(\d+) used(, (.+))?$", machine)
+    threads = env.get("threads", used.group(1) if used else "unrecorded")
+    gpu = f", {used.group(3)}" if used and used.group(3) else ""
+    return f"{threads} thread(s), CPU {env.get('cpu', 'unrecorded')}{gpu}"
+
+
+def pair_alike(variants: Sequence[str], results: Sequence[dict]) -> tuple[list[dict], list[str]]:
+    """(the runs of ``variants`` that the reference's run of the same seed computed alike, the others
+    named as 'variant seed k (its kind; the reference's)'); see :func:`run_kind`."""
+    kinds = {(r["variant"], int(r["seed"])): run_kind(r) for r in results if r["variant"] in variants}
+    alike, left_out = [], []
+    for r in results:
+        variant, seed = r["variant"], int(r["seed"])
+        if variant not in variants:
+            continue
+        reference = kinds.get((variants[0], seed))
+        if reference in (None, kinds[variant, seed]):
+            alike.append(r)
+        else:
+            left_out.append(f"{variant} seed {seed} ({kinds[variant, seed]}; {variants[0]}: {reference})")
+    return alike, left_out
+
+
 def paired_rows(variants: Sequence[str], results: Sequence[dict]) -> list[dict]:
     """For each metric and each variant but the reference (the first): the statistics of its per-seed
-    differences from the reference (:func:`~posecons.metrics.stats.compare`). Holm's correction runs
-    over the variants for the primary metric, and over every row of the secondary metrics together,
-    so that neither the variants nor the many secondary rows inflate the verdicts."""
+    differences from the reference (:func:`~posecons.metrics.stats.compare`), over the seeds whose two
+    runs computed alike (:func:`run_kind`). Holm's correction runs over the variants for the primary
+    metric, and over every row of the secondary metrics together, so that neither the variants nor the
+    many secondary rows inflate the verdicts."""
+    alike = pair_alike(variants, results)[0]
     differences = {}
     for label, get, fmt in paired_metrics(results):
-        values = _values([r for r in results if r["variant"] in variants], get)
+        values = _values(alike, get)
         diffs = paired_differences({v: values.get(v, {}) for v in variants}, variants[0])
         differences.update({(label, fmt, v): diffs[v] for v in variants[1:]})
     rows = []
@@ -319,7 +352,12 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
     missing, untrained_missing, done = _missing(study, results)
     runs = len(study["seeds"]) * len(variants)
     envs = [r["environment"] for r in results if "environment" in r]
-    code = "; ".join(dict.fromkeys(f"commit `{e['commit']}` on {e['machine']} (torch {e['torch']})" for e in envs))
+    code = "; ".join(
+        dict.fromkeys(
+            f"commit `{e['commit']}` on {e['machine']}{', CPU ' + e['cpu'] if 'cpu' in e else ''} (torch {e['torch']})"
+            for e in envs
+        )
+    )
     trained = [r for r in results if r["variant"] not in (UNTRAINED, FLOOR)]
     failed = "".join(
         f"\n- **failed** (the same command retries it): {f['variant']} seed {f['seed']}: {f['error']} (log: `{f['log']}`)"
@@ -363,6 +401,12 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
         figure = f"\n![paired differences]({figures.name}/paired_differences.png)\n"
     n = sorted({r["n"] for r in paired}) or [0]
     comparison = paired_table(paired, variants[0]) if paired else "Only one variant: nothing to compare.\n"
+    left_out = pair_alike(variants, results)[1]
+    if left_out:
+        comparison += (
+            f"\nNot paired, since {variants[0]}'s run of the same seed computed differently (the difference "
+            "would hold the machine's effect as well as the variant's): " + "; ".join(left_out) + ".\n"
+        )
     return f"""{header}
 ## Depth (paper Table 1 layout)
 
