@@ -307,6 +307,32 @@ CASES = [
         "evaluate-depth --checkpoint {in}/model.pt --gt {in}/gt.npz",
         ["--checkpoint needs --data-path"],
     ),
+    (
+        "evaluate-depth-dense-without-max-depth",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --gt-kind dense",
+        ["--gt-kind dense needs --max-depth"],
+    ),
+    (
+        "evaluate-depth-dense-without-gt",
+        "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
+        "--split-file {syn}/splits/synth/test_files.txt --gt-kind dense --max-depth 10",
+        ["--gt-kind dense needs --gt"],
+    ),
+    (
+        "evaluate-depth-min-depth-above-max-depth",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --min-depth 20 --max-depth 10",
+        ["--min-depth 20 must be below --max-depth 10"],
+    ),
+    (
+        "evaluate-depth-max-depth-0",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --max-depth 0",
+        ["--max-depth", "> 0"],
+    ),
+    (
+        "evaluate-depth-eigen-to-benchmark-dense",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --eigen-to-benchmark --gt-kind dense",
+        ["--eigen-to-benchmark", "not --gt-kind dense"],
+    ),
     # evaluate-pose
     (
         "evaluate-pose-sequence-word",
