@@ -135,17 +135,20 @@ def test_depth_scale_and_invalid_values_as_given(tmp_path):
 
 
 def test_tum_names_pair_by_the_nearest_time_and_quaternions_become_rotations(tmp_path):
-    """TUM RGB-D: colour rgb/<t>.png at 1.0, 1.1, 1.2 s; depth images 5 ms later, and decoys 30 ms
-    earlier; a 100 Hz trajectory whose pose at 1.1 s is q = (x, y, z, w) = (0, 0, sin 45°, cos 45°), a
-    quarter turn about z: R = [[0, −1, 0], [1, 0, 0], [0, 0, 1]], t = (1, 2, 3). Caught: the quaternion
-    read as (w, x, y, z), the farther timestamp taken, depth paired by order instead of by time."""
+    """TUM RGB-D: colour rgb/<t>.png at 1.003, 1.103, 1.203 s; each depth image 5 ms away (later, earlier,
+    later) with a decoy 15 ms away on the other side; a 100 Hz trajectory whose pose at 1.10 s (3 ms before
+    the second frame, 1.11 s is 7 ms after) is q = (x, y, z, w) = (0, 0, sin 45°, cos 45°), a quarter turn
+    about z: R = [[0, −1, 0], [1, 0, 0], [0, 0, 1]], t = (1, 2, 3). Caught: the quaternion read as
+    (w, x, y, z), always the next (or the previous) timestamp taken, depth paired by order."""
     seq = tmp_path / "tum"
     (seq / "rgb").mkdir(parents=True)
     (seq / "depth").mkdir()
-    for i, t in enumerate((1.0, 1.1, 1.2)):
+    for i, t in enumerate((1.003, 1.103, 1.203)):
+        side = 1 if i % 2 == 0 else -1
         Image.new("RGB", (16, 12), (40 * i, 0, 0)).save(seq / "rgb" / f"{t:.6f}.png")
-        Image.fromarray(np.full((12, 16), 1000 * (i + 1), np.uint16)).save(seq / "depth" / f"{t + 0.005:.6f}.png")
-        Image.fromarray(np.full((12, 16), 9000, np.uint16)).save(seq / "depth" / f"{t - 0.03:.6f}.png")
+        depth, decoy = np.full((12, 16), 1000 * (i + 1), np.uint16), np.full((12, 16), 9000, np.uint16)
+        Image.fromarray(depth).save(seq / "depth" / f"{t + 0.005 * side:.6f}.png")
+        Image.fromarray(decoy).save(seq / "depth" / f"{t - 0.015 * side:.6f}.png")
     stamps = np.arange(95, 126) / 100
     rows = [[t, 0, 0, 0, 0, 0, 0, 1] for t in stamps]
     rows[15] = [1.1, 1, 2, 3, 0, 0, np.sin(np.pi / 4), np.cos(np.pi / 4)]
