@@ -23,12 +23,14 @@ from posecons.cli import main
 from posecons.config import load_config
 from posecons.data.splits import read_split
 from posecons.model import PoseConsModel
+from rgbd_sequence import write_sequence
 
 TINY = ["model.height=64", "model.width=96", "model.num_layers=10", "model.pretrained=false"]
 TRAIN = "train --config kitti/baseline --data-path {syn} --out {out} --quiet " + " ".join(
     f"--set {s}" for s in TINY + ["data.split=synth", "train.batch_size=2", "data.num_workers=0", "train.max_steps=1"]
 )
 DRIVE = "2020_01_01/2020_01_01_drive_0000_sync"
+RGBD = "prepare-rgbd --input {in}/rgbd --out {out} --color frame-*.color.png --fx 20 --fy 20 --cx 8 --cy 6"
 STUDY_SPEC = {
     "preset": "synth/demo",
     "data": {"synth": {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}},
@@ -91,6 +93,21 @@ def world(make_synth, tmp_path_factory) -> dict[str, Path]:
     (inp / "two_times.txt").write_text("0\n0.1\n")
     (inp / "static.txt").write_text("2011_09_26 drive_0001 not-a-frame\n")
     (inp / "result.json").write_text('{"abs_rel": 0.1}')
+    # an RGB-D sequence (3 frames, 16 × 12) and broken files beside it, picked by each case's patterns
+    rgbd = inp / "rgbd"
+    write_sequence(rgbd)
+    for i in range(3):
+        Image.fromarray(np.ones((6, 8), np.uint16)).save(rgbd / f"small-{i:06d}.png")
+        for name, matrix in {
+            "nan": np.full((4, 4), np.nan),
+            "scaled": np.diag([2.0, 2, 2, 1]),
+            "row": np.ones((4, 4)),
+        }.items():
+            np.savetxt(rgbd / f"{name}-{i:06d}.txt", matrix if i == 1 else np.eye(4))
+    for i in range(2):  # no gone-000002.png
+        shutil.copyfile(rgbd / f"frame-{i:06d}.depth.png", rgbd / f"gone-{i:06d}.png")
+    (inp / "tum.txt").write_text("10 0 0 0 0 0 0 1\n11 0 0 0 0 0 0 1\n")
+    (inp / "two_rows_k.txt").write_text("585 0 320\n0 585 240\n")
     for name, change in STUDY_SPECS.items():
         (inp / f"{name}.yaml").write_text(yaml.safe_dump({**STUDY_SPEC, **change}))
     assert (
@@ -184,6 +201,70 @@ CASES = [
     (
         "prepare-out-under-file",
         "prepare --input {in}/frames --out {in}/blocker/x --fx 1 --fy 1 --cx 1 --cy 1",
+        ["--out", "blocker is a file"],
+    ),
+    # prepare-rgbd
+    (
+        "prepare-rgbd-depth-of-another-size",
+        RGBD + " --depth small-*.png --depth-scale 1000",
+        ["small-000000.png: depth image is 8×6 pixels", "frame-000000.color.png is 16×12"],
+    ),
+    (
+        "prepare-rgbd-missing-depth",
+        RGBD + " --depth gone-*.png --depth-scale 1000",
+        ["gone-000002.png: depth image of frame-000002.color.png not found"],
+    ),
+    (
+        "prepare-rgbd-missing-pose",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --poses gone-*.txt",
+        ["gone-000000.txt: pose file of frame-000000.color.png not found"],
+    ),
+    (
+        "prepare-rgbd-nan-in-a-pose",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --poses nan-*.txt",
+        ["nan-000001.txt", "NaN"],
+    ),
+    (
+        "prepare-rgbd-scaled-rotation",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --poses scaled-*.txt",
+        ["scaled-000001.txt", "rotation is not orthonormal"],
+    ),
+    (
+        "prepare-rgbd-bottom-row",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --poses row-*.txt",
+        ["row-000001.txt", "bottom row 1 1 1 1 is not 0 0 0 1"],
+    ),
+    (
+        "prepare-rgbd-no-tum-pose-at-a-frame",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --tum-poses {in}/tum.txt",
+        ["tum.txt: no pose at the time of", "frame-000000.color.png"],
+    ),
+    ("prepare-rgbd-depth-scale-0", RGBD + " --depth frame-*.depth.png --depth-scale 0", ["--depth-scale", "> 0"]),
+    ("prepare-rgbd-depth-scale-nan", RGBD + " --depth frame-*.depth.png --depth-scale nan", ["--depth-scale", "> 0"]),
+    (
+        "prepare-rgbd-depth-scale-word",
+        RGBD + " --depth frame-*.depth.png --depth-scale mm",
+        ["--depth-scale", "expected a number"],
+    ),
+    (
+        "prepare-rgbd-pattern-without-star",
+        RGBD.replace("frame-*.color.png", "frame.png") + " --depth frame-*.depth.png --depth-scale 1000",
+        ["--color 'frame.png'", "exactly one *"],
+    ),
+    (
+        "prepare-rgbd-no-intrinsics",
+        RGBD.replace(" --fx 20 --fy 20 --cx 8 --cy 6", "") + " --depth frame-*.depth.png --depth-scale 1000",
+        ["--fx --fy --cx --cy (pixels) or --calib FILE"],
+    ),
+    (
+        "prepare-rgbd-intrinsics-two-rows",
+        RGBD.replace(" --fx 20 --fy 20 --cx 8 --cy 6", " --calib {in}/two_rows_k.txt")
+        + " --depth frame-*.depth.png --depth-scale 1000",
+        ["two_rows_k.txt", "3 × 3 intrinsics matrix"],
+    ),
+    (
+        "prepare-rgbd-out-under-file",
+        RGBD.replace("{out}", "{in}/blocker/x") + " --depth frame-*.depth.png --depth-scale 1000",
         ["--out", "blocker is a file"],
     ),
     # cache
@@ -306,6 +387,32 @@ CASES = [
         "evaluate-depth-checkpoint-needs-data",
         "evaluate-depth --checkpoint {in}/model.pt --gt {in}/gt.npz",
         ["--checkpoint needs --data-path"],
+    ),
+    (
+        "evaluate-depth-dense-without-max-depth",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --gt-kind dense",
+        ["--gt-kind dense needs --max-depth"],
+    ),
+    (
+        "evaluate-depth-dense-without-gt",
+        "evaluate-depth --checkpoint {in}/model.pt --data-path {syn} "
+        "--split-file {syn}/splits/synth/test_files.txt --gt-kind dense --max-depth 10",
+        ["--gt-kind dense needs --gt"],
+    ),
+    (
+        "evaluate-depth-min-depth-above-max-depth",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --min-depth 20 --max-depth 10",
+        ["--min-depth 20 must be below --max-depth 10"],
+    ),
+    (
+        "evaluate-depth-max-depth-0",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --max-depth 0",
+        ["--max-depth", "> 0"],
+    ),
+    (
+        "evaluate-depth-eigen-to-benchmark-dense",
+        "evaluate-depth --pred-disps {in}/random.npy --gt {in}/gt.npz --eigen-to-benchmark --gt-kind dense",
+        ["--eigen-to-benchmark", "not --gt-kind dense"],
     ),
     # evaluate-pose
     (

@@ -1,5 +1,7 @@
 """Intrinsics conventions: normalised K (row 0 / W, row 1 / H), arguments in (height, width) order."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -38,3 +40,18 @@ def test_pixel_k_from_a_plain_k_a_raw_or_an_odometry_calibration_file(tmp_path):
     (tmp_path / "none.txt").write_text("P0: 1 0 0 0 0 1 0 0 0 0 1 0\n")
     with pytest.raises(PoseconsError, match="none.txt: no 'K', 'P_rect_02' or 'P2'"):
         read_calib_intrinsics(tmp_path / "none.txt")
+
+
+def test_intrinsics_from_a_plain_3x3_matrix_file(tmp_path):
+    """7-Scenes' camera-intrinsics.txt (read in place) is fx = fy = 585, cx = 320, cy = 240; a 'K:' file still
+    reads; a matrix whose bottom row is not 0 0 1, or a 3 × 4 one, is refused naming the file."""
+    from posecons.data.calib import read_intrinsics
+
+    real = Path(__file__).resolve().parents[2] / "shared" / "real" / "7scenes" / "camera-intrinsics.txt"
+    assert np.array_equal(read_intrinsics(real), [[585, 0, 320], [0, 585, 240], [0, 0, 1]])
+    (tmp_path / "k.txt").write_text("K: 721.5 0 609.6 0 721.5 172.9 0 0 1\n")
+    assert np.allclose(read_intrinsics(tmp_path / "k.txt"), K_PIXEL)
+    for text in ("585 0 320\n0 585 240\n0 1 1\n", "585 0 320 0\n0 585 240 0\n0 0 1 0\n"):
+        (tmp_path / "bad.txt").write_text(text)
+        with pytest.raises(PoseconsError, match=r"bad\.txt: expected a 3 × 3 intrinsics matrix"):
+            read_intrinsics(tmp_path / "bad.txt")

@@ -112,6 +112,45 @@ def test_evaluate_depth_with_a_fixed_scale_factor(tmp_path, capsys):
     assert "scaling none × 2.7" in capsys.readouterr().out  # bad values: tests/test_bad_inputs.py
 
 
+def test_evaluate_depth_dense_has_no_crop_and_the_users_depth_range(tmp_path, capsys):
+    """One 10 × 20 frame, no scaling, --gt-kind dense --min-depth 0.1 --max-depth 10. Rows 0–3 (above the
+    Garg crop): GT 2 m, prediction 4 m (error 1, 80 pixels). Rows 4–9: column 0 invalid (GT 0), column 1
+    GT 12 m beyond the range, column 2 GT 9 m predicted 20 m and clamped to 10 m (error 1/9, 6 pixels),
+    the rest exact (102 pixels). abs rel = (80 + 6/9) / 188. Caught: the Garg crop kept (rows 0–3 and 9,
+    column 19 dropped), the range not masking column 1, the clamp at 80 m (error 11/9), invalid pixels kept."""
+    gt, pred = np.full((10, 20), 2.0), np.full((10, 20), 2.0)
+    pred[:4] = 4.0
+    gt[4:, 0], gt[4:, 1], gt[4:, 2], pred[4:, 2] = 0.0, 12.0, 9.0, 20.0
+    _write_gt(tmp_path / "gt.npz", [gt], ["custom/custom_drive_0000_sync 0 l"])
+    np.save(tmp_path / "pred.npy", (1 / pred)[None].astype(np.float32))
+    argv = ["evaluate-depth", "--pred-disps", str(tmp_path / "pred.npy"), "--gt", str(tmp_path / "gt.npz")]
+    argv += ["--gt-kind", "dense", "--min-depth", "0.1", "--max-depth", "10", "--scaling", "none"]
+    assert main([*argv, "--json", str(tmp_path / "d.json")]) == 0
+    result = json.loads((tmp_path / "d.json").read_text())
+    assert result["abs_rel"] == pytest.approx((80 + 6 / 9) / 188, rel=1e-6)
+    assert (result["gt_kind"], result["crop"], result["depth_range"]) == ("dense", "none", [0.1, 10.0])
+    assert "depth range 0.1–10 m" in capsys.readouterr().out
+
+
+def test_evaluate_depth_dense_prediction_at_twice_the_depth_scores_zero(tmp_path):
+    """Two frames of random dense GT with 30 % invalid pixels (0) whose prediction is junk; elsewhere the
+    prediction is 2 × GT (frame 0) and 4 × GT (frame 1): per-frame median scaling gives abs rel 0, scales
+    0.5 and 0.25 and σ/μ = 0.125 / 0.375. Caught: invalid pixels evaluated, the scale taken over all pixels."""
+    rng = np.random.default_rng(0)
+    gts = [rng.uniform(0.5, 5.0, (24, 32)) for _ in range(2)]
+    for gt in gts:
+        gt[rng.random(gt.shape) < 0.3] = 0.0
+    preds = [np.where(gt > 0, factor * gt, rng.uniform(0.2, 50, gt.shape)) for gt, factor in zip(gts, (2, 4))]
+    _write_gt(tmp_path / "gt.npz", gts, [f"custom/custom_drive_0000_sync {i} l" for i in range(2)])
+    np.save(tmp_path / "pred.npy", 1 / np.stack(preds).astype(np.float32))
+    argv = ["evaluate-depth", "--pred-disps", str(tmp_path / "pred.npy"), "--gt", str(tmp_path / "gt.npz")]
+    assert main([*argv, "--gt-kind", "dense", "--max-depth", "10", "--json", str(tmp_path / "d.json")]) == 0
+    result = json.loads((tmp_path / "d.json").read_text())
+    assert result["abs_rel"] == pytest.approx(0.0, abs=1e-6) and result["a1"] == 1.0
+    assert result["scales"] == pytest.approx([0.5, 0.25], rel=1e-6)
+    assert result["scale_cv"] == pytest.approx(1 / 3, rel=1e-6)
+
+
 def test_evaluate_depth_eigen_to_benchmark(tmp_path, capsys):
     """Predictions for the 697 Eigen test frames, each a constant depth 1 + i/10 m (i: its Eigen index);
     improved GT on the 652 eigen_benchmark lines holding the depth of their Eigen frame. Picking the

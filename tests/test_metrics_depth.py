@@ -37,6 +37,17 @@ def test_mask_depth_limits():
     assert valid_mask(gt, "none").sum() == 6
 
 
+def test_a_depth_range_masks_dense_gt_everywhere_and_narrows_the_garg_mask():
+    """Dense GT (crop none) with a range: min < gt < max strictly, NaN and inf out, no crop; with the Garg
+    crop the range replaces 1e-3–80 m. Caught: a range ignored without the crop, or bounds taken as ≤."""
+    gt = np.zeros((375, 1242), np.float32)
+    gt[200, 100:107] = [0.1, 0.5, 9.9, 10.0, 30.0, np.nan, np.inf]
+    gt[0, 0] = 5.0  # outside the Garg crop
+    assert valid_mask(gt, "none", (0.1, 10.0))[200, 100:107].tolist() == [False, True, True] + [False] * 4
+    assert valid_mask(gt, "none", (0.1, 10.0)).sum() == 3
+    assert valid_mask(gt, "garg", (0.1, 10.0)).sum() == 2
+
+
 def test_metrics_by_hand():
     gt = np.array([2.0, 4.0])
     pred = np.array([1.1, 5.0])
@@ -80,6 +91,22 @@ def test_median_scaling_and_clamp():
     gt100 = np.full((8, 8), 100.0, np.float32)
     r = evaluate_depth(np.full((1, 4, 4), 2.0, np.float32), [gt100], ["a"], crop="none")
     assert r["scales"] == pytest.approx([200.0]) and r["abs_rel"] == pytest.approx(0.2)
+
+
+def test_a_depth_range_clamps_the_prediction_to_it():
+    """GT 9 m, prediction 20 m: clamped to 10 m with the range 0.1–10 m (abs rel 1/9), to 80 m without
+    (11/9); GT 8 m, prediction 0.01 m: raised to 0.1 m (abs rel 7.9/8)."""
+
+    def abs_rel(gt: float, pred: float, depth_range=None) -> float:
+        disp = np.full((1, 2, 2), 1 / pred, np.float32)
+        gts = [np.full((2, 2), gt, np.float32)]
+        return evaluate_depth(disp, gts, ["a"], scaling="none", crop="none", depth_range=depth_range)["abs_rel"]
+
+    assert abs_rel(9.0, 20.0, (0.1, 10.0)) == pytest.approx(1 / 9)
+    assert abs_rel(9.0, 20.0) == pytest.approx(11 / 9)
+    assert abs_rel(8.0, 0.01, (0.1, 10.0)) == pytest.approx(7.9 / 8)
+    with pytest.raises(PoseconsError, match="depth range"):
+        abs_rel(8.0, 4.0, (10.0, 0.1))
 
 
 def test_sequence_scaling_uses_one_factor_per_sequence():

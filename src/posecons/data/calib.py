@@ -134,6 +134,25 @@ def read_calib_intrinsics(path: str | Path) -> np.ndarray:
     )
 
 
+def read_intrinsics(path: str | Path) -> np.ndarray:
+    """(3, 3) float64 pixel K from a plain 3 × 3 matrix (three lines of three numbers, as 7-Scenes'
+    ``camera-intrinsics.txt``) or, when the file has ``key: values`` lines, :func:`read_calib_intrinsics`."""
+    path = require_file(Path(path), "intrinsics file")
+    lines = [line.split() for line in path.read_text().splitlines() if line.strip()]
+    if any(":" in line[0] for line in lines):
+        return read_calib_intrinsics(path)
+    try:
+        k = np.array(lines, dtype=np.float64)
+        ok = k.shape == (3, 3) and np.isfinite(k).all() and k[0, 0] > 0 and k[1, 1] > 0 and (k[2] == (0, 0, 1)).all()
+    except ValueError:  # ragged rows or a word
+        ok = False
+    if not ok:
+        raise PoseconsError(
+            f"{path}: expected a 3 × 3 intrinsics matrix (fx 0 cx / 0 fy cy / 0 0 1, fx and fy > 0) or 'K: 9 numbers'"
+        )
+    return k
+
+
 def raw_intrinsics(date_dir: Path, cam: int = 2) -> np.ndarray:
     """Normalised (3, 3) float32 K of rectified camera ``cam`` of a raw date folder."""
     p_rect, (width, height) = raw_projection(date_dir, cam)

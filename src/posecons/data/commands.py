@@ -1,4 +1,4 @@
-"""Data sub-commands of the ``posecons`` CLI: synth, export-gt, prepare, cache, build-split."""
+"""Data sub-commands of the ``posecons`` CLI: synth, export-gt, prepare, prepare-rgbd, cache, build-split."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from ..cli import (
     field_of_view,
     finite_float,
     fraction,
+    non_negative_float,
     non_negative_int,
     output_file,
     output_folder,
@@ -20,6 +21,7 @@ from ..cli import (
 from ..errors import PoseconsError
 
 GUESS_FOV = 60.0  # degrees: a typical dashcam's horizontal field of view (50–70°), when none is given
+PIXEL_INTRINSICS = ("fx", "fy", "cx", "cy")
 
 # The library modules are imported inside each command: `posecons --help` must not pay for torch or av.
 
@@ -71,12 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("prepare", help="turn videos or frame folders into a KITTI-raw-layout dataset")
     p.add_argument("--input", type=Path, nargs="+", required=True, help="video files and/or folders of frames")
     p.add_argument("--out", type=output_folder, required=True, help="output dataset folder (new or empty)")
-    for name in ("fx", "fy", "cx", "cy"):
-        p.add_argument(
-            f"--{name}",
-            type=positive_float if name.startswith("f") else finite_float,
-            help="intrinsics in pixels of the input frames",
-        )
+    _add_pixel_intrinsics(p)
     p.add_argument("--calib", type=Path, help="file with 'K: 9 numbers', 'P_rect_02:' or 'P2:' instead")
     p.add_argument(
         "--fov",
@@ -100,6 +97,63 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(default 0.004: a standing camera; highway video at 12.5 fps differs by 0.006–0.017)",
     )
     p.set_defaults(func=_prepare)
+
+    p = subparsers.add_parser(
+        "prepare-rgbd",
+        help="turn an RGB-D sequence (colour, depth, poses) into a dataset with depth and pose ground truth",
+        description="The prepare layout of the colour frames, plus OUT/gt_depths.npz (their depth in metres, "
+        "for evaluate-depth --gt-kind dense) and, with poses, OUT/odometry (for evaluate-pose). Patterns are "
+        "relative to --input; their one * is the frame's name, which pairs a colour frame with its files.",
+    )
+    p.add_argument("--input", type=Path, required=True, help="folder of the sequence")
+    p.add_argument("--out", type=output_folder, required=True, help="output dataset folder (new or empty)")
+    p.add_argument(
+        "--color",
+        required=True,
+        metavar="PATTERN",
+        help="colour frames, e.g. 'frame-*.color.jpg' (7-Scenes) or 'rgb/*.png' (TUM RGB-D); sorted by name",
+    )
+    p.add_argument(
+        "--depth", required=True, metavar="PATTERN", help="depth images (16-bit PNG), e.g. 'frame-*.depth.png'"
+    )
+    p.add_argument(
+        "--depth-scale",
+        type=positive_float,
+        required=True,
+        help="depth values per metre: 1000 for millimetres (Kinect, RealSense, 7-Scenes, ScanNet), 5000 for TUM RGB-D",
+    )
+    p.add_argument(
+        "--invalid-depth",
+        type=finite_float,
+        nargs="+",
+        metavar="V",
+        help="depth values that mean no measurement (default: 0 65535)",
+    )
+    poses = p.add_mutually_exclusive_group()
+    poses.add_argument(
+        "--poses", metavar="PATTERN", help="a 4 × 4 camera → world matrix (metres) per frame, e.g. 'frame-*.pose.txt'"
+    )
+    poses.add_argument(
+        "--tum-poses",
+        type=Path,
+        metavar="FILE",
+        help="or a TUM trajectory file (t tx ty tz qx qy qz qw, camera → world)",
+    )
+    p.add_argument(
+        "--max-time-difference",
+        type=non_negative_float,
+        metavar="S",
+        help="names are timestamps (seconds): take the depth image and pose nearest in time, at most S away "
+        "(TUM's associate.py: 0.02); default: the same name (--tum-poses: the same timestamp)",
+    )
+    _add_pixel_intrinsics(p)
+    p.add_argument(
+        "--calib", type=Path, help="a 3 × 3 intrinsics matrix file (7-Scenes' camera-intrinsics.txt) or 'K: 9 numbers'"
+    )
+    p.add_argument(
+        "--every", type=positive_int, default=1, help="keep one frame in N (default 1), with its depth and pose"
+    )
+    p.set_defaults(func=_prepare_rgbd)
 
     p = subparsers.add_parser(
         "cache",
@@ -153,26 +207,42 @@ def _export_gt(args: argparse.Namespace) -> int:
     return 0
 
 
-def _prepare(args: argparse.Namespace) -> int:
+def _add_pixel_intrinsics(p: argparse.ArgumentParser) -> None:
+    for name in PIXEL_INTRINSICS:
+        p.add_argument(
+            f"--{name}",
+            type=positive_float if name.startswith("f") else finite_float,
+            help="intrinsics in pixels of the input frames",
+        )
+
+
+def _pixel_intrinsics(args: argparse.Namespace, alternative: str):
+    """The (3, 3) K of --fx --fy --cx --cy, None when none of them is given; ``alternative`` is named
+    when only some are."""
     import numpy as np
 
+    given = [getattr(args, n) for n in PIXEL_INTRINSICS]
+    if all(v is None for v in given):
+        return None
+    if any(v is None for v in given):
+        raise PoseconsError(f"--fx --fy --cx --cy: give all four (pixels), or {alternative}")
+    fx, fy, cx, cy = given
+    return np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
+
+
+def _prepare(args: argparse.Namespace) -> int:
     from .calib import read_calib_intrinsics
     from .prepare import prepare
 
-    given = [getattr(args, n) for n in ("fx", "fy", "cx", "cy")]
+    given = [getattr(args, n) for n in PIXEL_INTRINSICS]
     sources = ["--fx --fy --cx --cy" if any(v is not None for v in given) else "", "--calib" * (args.calib is not None)]
     sources = [s for s in sources + ["--fov" * (args.fov is not None)] if s]
     if len(sources) > 1:
         raise PoseconsError(f"give one of --fx --fy --cx --cy, --calib and --fov, not {' and '.join(sources)}")
-    k, fov = None, args.fov
+    k, fov = _pixel_intrinsics(args, "--fov DEGREES"), args.fov
     if args.calib is not None:
         k = read_calib_intrinsics(args.calib)
-    elif any(v is not None for v in given):
-        if not all(v is not None for v in given):
-            raise PoseconsError("--fx --fy --cx --cy: give all four (pixels), or --fov DEGREES")
-        fx, fy, cx, cy = given
-        k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]])
-    elif fov is None:
+    elif k is None and fov is None:
         fov = GUESS_FOV
     info = prepare(args.input, args.out, k, args.width, args.height, args.static_threshold, fov=fov, every=args.every)
     if not sources:  # after the work, so that it is the last thing the user reads
@@ -184,6 +254,36 @@ def _prepare(args: argparse.Namespace) -> int:
         )
     print(
         f"wrote {len(info['drives'])} drives ({sum(info['frames'])} frames; {info['train']} train / {info['val']} val lines) to {args.out}"
+    )
+    return 0
+
+
+def _prepare_rgbd(args: argparse.Namespace) -> int:
+    from .calib import read_intrinsics
+    from .rgbd import INVALID_DEPTH, prepare_rgbd
+
+    k = _pixel_intrinsics(args, "--calib FILE")
+    if k is not None and args.calib is not None:
+        raise PoseconsError("give one of --fx --fy --cx --cy and --calib, not both")
+    if k is None and args.calib is None:
+        raise PoseconsError("give the colour frames' intrinsics: --fx --fy --cx --cy (pixels) or --calib FILE")
+    info = prepare_rgbd(
+        args.input,
+        args.out,
+        read_intrinsics(args.calib) if k is None else k,
+        args.color,
+        args.depth,
+        args.depth_scale,
+        INVALID_DEPTH if args.invalid_depth is None else args.invalid_depth,
+        args.poses,
+        args.tum_poses,
+        args.max_time_difference,
+        args.every,
+    )
+    poses = f"; poses: {args.out}/odometry/poses/{info['odometry_sequence']}.txt" if info["odometry_sequence"] else ""
+    print(
+        f"wrote {len(info['frames'])} frames to {args.out} ({info['train']} train / {info['val']} val lines); "
+        f"depth ground truth: {args.out}/{info['ground_truth']}{poses}"
     )
     return 0
 

@@ -7,6 +7,7 @@ in split order (0 = no ground truth; sizes may differ between dates) and a unico
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Literal, Optional
 
@@ -17,7 +18,7 @@ from ..errors import PoseconsError
 from ..fileio import atomic_file
 from .calib import raw_projection, velo_to_image
 from .io import load_velodyne, require_file
-from .splits import SIDE_TO_CAMERA, SplitSource, read_split
+from .splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
 
 DepthKind = Literal["velo_x", "camera_z"]
 
@@ -48,9 +49,12 @@ def velo_to_depth_map(
     return out.reshape(height, width).astype(np.float32)
 
 
-def read_improved_gt(path: Path) -> np.ndarray:
-    """KITTI improved (annotated) depth PNG: uint16 / 256 metres, 0 = invalid → float32 (H, W)."""
-    require_file(Path(path), "improved ground-truth PNG")
+def read_depth_image(
+    path: Path, scale: float, invalid: Sequence[float] = (0,), what: str = "depth image"
+) -> np.ndarray:
+    """A single-channel depth image (a 16-bit PNG) holding ``scale`` values per metre → float32 (H, W)
+    metres; pixels holding one of the ``invalid`` values (or ≤ 0, NaN) become 0, no ground truth."""
+    require_file(Path(path), what)
     try:
         with Image.open(path) as img:
             raw = np.asarray(img)
@@ -58,7 +62,14 @@ def read_improved_gt(path: Path) -> np.ndarray:
         raise PoseconsError(f"{path}: unreadable PNG ({exc})") from exc
     if raw.ndim != 2:
         raise PoseconsError(f"{path}: expected a single-channel 16-bit PNG, got shape {raw.shape}")
-    return (raw.astype(np.float32) / 256.0).astype(np.float32)
+    depth = raw.astype(np.float64) / scale
+    depth[np.isin(raw, invalid) | ~(depth > 0)] = 0.0
+    return depth.astype(np.float32)
+
+
+def read_improved_gt(path: Path) -> np.ndarray:
+    """KITTI improved (annotated) depth PNG: uint16 / 256 metres, 0 = invalid → float32 (H, W)."""
+    return read_depth_image(path, 256.0, what="improved ground-truth PNG")
 
 
 def lidar_gt(data_path: Path, folder: str, frame: int, side: str = "l", depth: DepthKind = "velo_x") -> np.ndarray:
@@ -86,18 +97,22 @@ def export_gt(
 ) -> int:
     """Write the ground truth of every split line to ``out`` (.npz, see module doc); returns the count."""
     lines = read_split(split)
-    arrays = {}
-    for i, line in enumerate(lines):
-        if improved:
-            arrays[f"{i:06d}"] = read_improved_gt(
-                improved_gt_path(data_path, line.folder, line.frame, line.side, improved_root)
-            )
-        else:
-            arrays[f"{i:06d}"] = lidar_gt(data_path, line.folder, line.frame, line.side, depth)
+    maps = [
+        read_improved_gt(improved_gt_path(data_path, line.folder, line.frame, line.side, improved_root))
+        if improved
+        else lidar_gt(data_path, line.folder, line.frame, line.side, depth)
+        for line in lines
+    ]
+    write_gt(out, maps, lines)
+    return len(lines)
+
+
+def write_gt(out: Path, maps: Sequence[np.ndarray], lines: Sequence[SplitLine]) -> None:
+    """Write (H, W) depth maps in metres (0 = none) and their split lines as an ``.npz`` (module doc)."""
+    arrays = {f"{i:06d}": np.asarray(m, dtype=np.float32) for i, m in enumerate(maps)}
     arrays["lines"] = np.array([str(line) for line in lines], dtype=np.str_)
     with atomic_file(Path(out)) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)
-    return len(lines)
 
 
 def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:

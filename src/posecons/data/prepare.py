@@ -65,6 +65,29 @@ def fov_intrinsics(fov_degrees: float, width: int, height: int) -> np.ndarray:
     return np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], dtype=np.float64)
 
 
+def drive_folder(index: int) -> str:
+    """The folder of input ``index``'s frames, relative to the dataset: ``custom/custom_drive_NNNN_sync``."""
+    return f"{DATE}/{DATE}_drive_{index:04d}_sync"
+
+
+def write_calibration(out: Path, k: np.ndarray, size: tuple[int, int]) -> None:
+    """``out/custom/calib_cam_to_cam.txt``: the pixel K of frames of ``size`` (width, height) as
+    ``P_rect_02``/``S_rect_02``, what :class:`~posecons.data.kitti_raw.KittiRawDataset` reads."""
+    p_rect = np.concatenate([k, np.zeros((3, 1))], axis=1)
+    entries = {"S_rect_02": list(size), "R_rect_00": np.eye(3).ravel(), "P_rect_02": p_rect.ravel()}
+    (out / DATE / "calib_cam_to_cam.txt").write_text(format_calib(entries, calib_time=None))
+
+
+def write_train_val(out: Path, lines: list[SplitLine], val_fraction: float = 0.1, seed: int = 0) -> int:
+    """Shuffle ``lines`` (with ``seed``) into ``out/splits/custom/{train,val}_files.txt``, a
+    ``val_fraction`` for validation; returns the validation count."""
+    random.Random(seed).shuffle(lines)
+    n_val = int(round(len(lines) * val_fraction))
+    write_split(out / "splits" / "custom" / "train_files.txt", lines[n_val:])
+    write_split(out / "splits" / "custom" / "val_files.txt", lines[:n_val])
+    return n_val
+
+
 def prepare(
     inputs: list[Path],
     out: Path,
@@ -92,7 +115,7 @@ def prepare(
     lines, counts, native = [], [], None
     with output_dir(out) as tmp:
         for index, source in enumerate(map(Path, inputs)):
-            folder = f"{DATE}/{DATE}_drive_{index:04d}_sync"
+            folder = drive_folder(index)
             data = tmp / folder / "image_02" / "data"
             data.mkdir(parents=True)
             kept, last = 0, None
@@ -121,15 +144,10 @@ def prepare(
         k = native_k.copy()
         k[0] *= size[0] / native[0]
         k[1] *= size[1] / native[1]
-        p_rect = np.concatenate([k, np.zeros((3, 1))], axis=1)
-        entries = {"S_rect_02": list(size), "R_rect_00": np.eye(3).ravel(), "P_rect_02": p_rect.ravel()}
-        (tmp / DATE / "calib_cam_to_cam.txt").write_text(format_calib(entries, calib_time=None))
-        random.Random(seed).shuffle(lines)
-        n_val = int(round(len(lines) * val_fraction))
-        write_split(tmp / "splits" / "custom" / "train_files.txt", lines[n_val:])
-        write_split(tmp / "splits" / "custom" / "val_files.txt", lines[:n_val])
+        write_calibration(tmp, k, size)
+        n_val = write_train_val(tmp, lines, val_fraction, seed)
     return {
-        "drives": [f"{DATE}/{DATE}_drive_{i:04d}_sync" for i in range(len(counts))],
+        "drives": [drive_folder(i) for i in range(len(counts))],
         "frames": counts,
         "train": len(lines) - n_val,
         "val": n_val,

@@ -1,6 +1,6 @@
 """Trajectory files: KITTI (12 numbers a line, 3×4 row-major camera → world; the odometry
 ``poses/NN.txt``), TUM (``timestamp tx ty tz qx qy qz qw``), the two formats the ``evo`` tool reads,
-and KITTI ``times.txt``."""
+KITTI ``times.txt``, and one 4 × 4 camera → world matrix per frame (7-Scenes, ScanNet)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from ..metrics.pose import quaternion_to_rotation, rotation_to_quaternion
 from .io import require_file
 
 KITTI_RATE_HZ = 10.0  # timestamps (frame index / 10 Hz) when no times file is given
+RIGID_TOLERANCE = 1e-2  # largest |R·Rᵀ − I| entry accepted as a rotation: 7-Scenes' own poses reach 3.2e-4
 
 
 def _read_rows(path: str | Path, columns: int, what: str) -> np.ndarray:
@@ -62,6 +63,34 @@ def read_kitti_poses(path: str | Path) -> np.ndarray:
     if len(poses) == 0:
         raise PoseconsError(f"{path}: no KITTI poses found")
     return poses
+
+
+def check_rigid(pose: np.ndarray, source: str) -> np.ndarray:
+    """``pose`` (4, 4) if it is a finite rigid transform — an orthonormal rotation with determinant +1 and
+    the bottom row 0 0 0 1, each to :data:`RIGID_TOLERANCE` — else an error naming ``source``."""
+    if not np.isfinite(pose).all():
+        raise PoseconsError(f"{source}: NaN or infinite number in a pose")
+    if np.abs(pose[3] - (0, 0, 0, 1)).max() > RIGID_TOLERANCE:
+        raise PoseconsError(
+            f"{source}: bottom row {' '.join(f'{v:g}' for v in pose[3])} is not 0 0 0 1 (not a rigid pose)"
+        )
+    rotation = pose[:3, :3]
+    error = np.abs(rotation @ rotation.T - np.eye(3)).max()
+    if error > RIGID_TOLERANCE or np.linalg.det(rotation) < 0:
+        raise PoseconsError(
+            f"{source}: the rotation is not orthonormal with determinant +1 (|R·Rᵀ − I| up to {error:.2g}, "
+            f"det {np.linalg.det(rotation):.3g}): not a rigid pose"
+        )
+    return pose
+
+
+def read_pose_matrix(path: str | Path) -> np.ndarray:
+    """(4, 4) float64 camera → world pose from a file of four lines of four numbers (7-Scenes'
+    ``frame-*.pose.txt``), checked by :func:`check_rigid`."""
+    rows = _read_rows(path, 4, "pose matrix")
+    if len(rows) != 4:
+        raise PoseconsError(f"{path}: expected a 4 × 4 pose matrix (four lines of four numbers), got {len(rows)} lines")
+    return check_rigid(rows, str(path))
 
 
 def write_kitti_poses(path: str | Path, poses: np.ndarray) -> None:

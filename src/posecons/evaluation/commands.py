@@ -51,7 +51,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--gt-kind",
         choices=tuple(depth.CROP_FOR_GT_KIND),
         help="lidar (default): Garg crop, 1e-3 < gt < 80 m; improved (default with --eigen-to-benchmark): "
-        "gt > 0, no crop",
+        "gt > 0, no crop; dense (an RGB-D camera's depth images, e.g. the gt_depths.npz of prepare-rgbd): "
+        "no crop, --min-depth < gt < --max-depth",
+    )
+    p.add_argument(
+        "--min-depth",
+        type=positive_float,
+        metavar="M",
+        help="metres: evaluate only ground truth above M, clamp predictions to at least M (default 1e-3)",
+    )
+    p.add_argument(
+        "--max-depth",
+        type=positive_float,
+        metavar="M",
+        help="metres: evaluate only ground truth below M, clamp predictions to at most M (default 80, KITTI's; "
+        "--gt-kind dense needs it, e.g. 10 indoors)",
     )
     p.add_argument(
         "--eigen-to-benchmark",
@@ -153,9 +167,20 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
             "--eigen-to-benchmark picks from saved Eigen predictions (--pred-disps); with --checkpoint "
             "pass --split-file eigen_benchmark/test_files.txt --gt-kind improved"
         )
-    if args.eigen_to_benchmark and args.gt_kind == "lidar":
-        raise PoseconsError("--eigen-to-benchmark scores against the improved ground truth, not --gt-kind lidar")
+    if args.eigen_to_benchmark and args.gt_kind not in (None, "improved"):
+        raise PoseconsError(
+            f"--eigen-to-benchmark scores against the improved ground truth, not --gt-kind {args.gt_kind}"
+        )
     gt_kind = args.gt_kind or ("improved" if args.eigen_to_benchmark else "lidar")
+    if gt_kind == "dense" and args.gt is None:
+        raise PoseconsError("--gt-kind dense needs --gt (depth maps, e.g. the gt_depths.npz of prepare-rgbd)")
+    if gt_kind == "dense" and args.max_depth is None:
+        raise PoseconsError("--gt-kind dense needs --max-depth: the camera's depth range (metres, e.g. 10 indoors)")
+    depth_range = None
+    if args.min_depth is not None or args.max_depth is not None:
+        depth_range = (args.min_depth or depth.MIN_DEPTH, args.max_depth or depth.MAX_DEPTH)
+        if depth_range[0] >= depth_range[1]:
+            raise PoseconsError(f"--min-depth {depth_range[0]:g} must be below --max-depth {depth_range[1]:g}")
     if args.checkpoint is not None:
         _require(args, "data_path", "split_file")
     with tempfile.TemporaryDirectory() as tmp:
@@ -180,7 +205,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
             disps = evaluate.eigen_to_benchmark(disps, split, pred_name)
 
     result = evaluate.depth_result(
-        disps, gts, split, args.scaling, gt_kind, pred_name, str(gt_path), args.scale_factor or 1.0
+        disps, gts, split, args.scaling, gt_kind, pred_name, str(gt_path), args.scale_factor or 1.0, depth_range
     )
     if args.checkpoint is not None:
         result.update(checkpoint=describe_checkpoint(args.checkpoint))
@@ -193,6 +218,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     print(
         f"{result['n_frames']} frames, scaling {result['scaling']}"
         + (f" × {result['scale_factor']:g}" if result["scale_factor"] != 1 else "")
+        + (f", depth range {depth_range[0]:g}–{depth_range[1]:g} m" if depth_range else "")
         + f", {result['n_skipped']} skipped (no valid GT); "
         f"scales: median {result['scale_median']:.3f}, std/median {result['scale_std_over_median']:.3f}, "
         f"σ/μ pooled {result['scale_cv_pooled']:.3f}"

@@ -94,6 +94,7 @@ def depth_result(
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
     scale_factor: float = 1.0,
+    depth_range: tuple[float, float] | None = None,
 ) -> dict:
     """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
     N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
@@ -107,6 +108,7 @@ def depth_result(
         pred_name=pred_name,
         gt_name=gt_name,
         scale_factor=scale_factor,
+        depth_range=depth_range,
     )
     result.update(gt_kind=gt_kind, predictions=pred_name, skipped_lines=[str(lines[i]) for i in result["skipped"]])
     return result

@@ -3,7 +3,8 @@
 Plain numpy functions, cheap enough for training-time validation. The protocol:
 resize the predicted (scaled) disparity bilinearly to the GT size (``align_corners=False``),
 depth = 1 / disparity, mask the valid GT pixels, scale (per frame, per sequence or not at all),
-clamp the prediction to [1e-3, 80] m, then average the per-frame metrics over frames.
+clamp the prediction to [1e-3, 80] m (or to a depth range of the user's, as dense indoor GT needs),
+then average the per-frame metrics over frames.
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ GARG_CROP = (0.40810811, 0.99189189, 0.03594771, 0.96405229)
 METRIC_NAMES = ("abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3")
 SCALINGS = ("frame", "sequence", "none")
 CROPS = ("garg", "none")
-# Which mask each kind of ground truth is evaluated with.
-CROP_FOR_GT_KIND = {"lidar": "garg", "improved": "none"}
+# Which mask each kind of ground truth is evaluated with (dense: depth images of an RGB-D camera).
+CROP_FOR_GT_KIND = {"lidar": "garg", "improved": "none", "dense": "none"}
 
 
 def garg_crop_bounds(height: int, width: int) -> tuple[int, int, int, int]:
@@ -31,20 +32,25 @@ def garg_crop_bounds(height: int, width: int) -> tuple[int, int, int, int]:
     return int(top * height), int(bottom * height), int(left * width), int(right * width)
 
 
-def valid_mask(gt: np.ndarray, crop: str = "garg") -> np.ndarray:
+def valid_mask(gt: np.ndarray, crop: str = "garg", depth_range: tuple[float, float] | None = None) -> np.ndarray:
     """Boolean (H, W) mask of the GT pixels that are evaluated.
 
-    ``garg``: 1e-3 < gt < 80 inside the Garg crop (Eigen split, LiDAR GT);
-    ``none``: finite gt > 0 everywhere (KITTI improved GT, eigen_benchmark).
+    ``garg``: min < gt < max inside the Garg crop, (min, max) = ``depth_range`` or (1e-3, 80) m
+    (Eigen split, LiDAR GT); ``none``: finite gt > 0 everywhere (KITTI improved GT, eigen_benchmark),
+    or min < gt < max everywhere when ``depth_range`` is given (dense GT of an RGB-D camera).
     """
-    if crop == "none":
-        return np.isfinite(gt) & (gt > 0)
-    if crop != "garg":
+    if crop not in CROPS:
         raise PoseconsError(f"unknown crop {crop!r}; expected one of {CROPS}")
-    top, bottom, left, right = garg_crop_bounds(*gt.shape)
-    in_crop = np.zeros(gt.shape, dtype=bool)
-    in_crop[top:bottom, left:right] = True
-    return in_crop & (gt > MIN_DEPTH) & (gt < MAX_DEPTH)
+    if crop == "none" and depth_range is None:
+        return np.isfinite(gt) & (gt > 0)
+    low, high = depth_range or (MIN_DEPTH, MAX_DEPTH)
+    mask = (gt > low) & (gt < high)  # NaN compares false: never valid
+    if crop == "garg":
+        top, bottom, left, right = garg_crop_bounds(*gt.shape)
+        in_crop = np.zeros(gt.shape, dtype=bool)
+        in_crop[top:bottom, left:right] = True
+        mask &= in_crop
+    return mask
 
 
 def resize_disparity(disp: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -204,6 +210,7 @@ def evaluate_depth(
     pred_name: str = "predictions",
     gt_name: str = "ground truth",
     scale_factor: float = 1.0,
+    depth_range: tuple[float, float] | None = None,
 ) -> dict:
     """Evaluate N predicted disparities against N GT depth maps (split order).
 
@@ -211,7 +218,9 @@ def evaluate_depth(
     sequences: N sequence names (the split line's folder). ``scaling`` is ``frame``, ``sequence``
     (one factor per sequence: the median of its frame scales) or ``none``, which multiplies every
     depth by ``scale_factor`` instead (Monodepth2's 5.4 for stereo-trained models); ``crop`` is ``garg`` or
-    ``none`` (see :func:`valid_mask`). Frames without valid GT pixels are skipped and listed.
+    ``none`` (see :func:`valid_mask`). ``depth_range`` (min, max) in metres: only GT strictly inside it
+    is evaluated and the scaled prediction is clamped to it (None: the crop's protocol, clamp to
+    [1e-3, 80]). Frames without valid GT pixels are skipped and listed.
     ``pred_name``/``gt_name`` name the inputs in error messages (e.g. file paths).
 
     Returns the metric means over evaluated frames plus ``scales`` (per-frame median ratios, NaN
@@ -224,6 +233,8 @@ def evaluate_depth(
         raise PoseconsError(f"unknown crop {crop!r}; expected one of {CROPS}")
     if not (np.isfinite(scale_factor) and scale_factor > 0) or (scale_factor != 1.0 and scaling != "none"):
         raise PoseconsError(f"scale factor {scale_factor} needs scaling 'none' (not {scaling!r}) and must be > 0")
+    if depth_range is not None and not (np.isfinite(depth_range).all() and 0 < depth_range[0] < depth_range[1]):
+        raise PoseconsError(f"depth range {depth_range} must be two finite depths with 0 < min < max (metres)")
     disps = check_disparities(pred_disps, pred_name)
     if not (len(disps) == len(gt_depths) == len(sequences)):
         raise PoseconsError(
@@ -238,7 +249,7 @@ def evaluate_depth(
         gt = np.asarray(gt, dtype=np.float32)
         if gt.ndim != 2:
             raise PoseconsError(f"{gt_name}: frame {i} has shape {gt.shape}, expected (H, W)")
-        mask = valid_mask(gt, crop)
+        mask = valid_mask(gt, crop, depth_range)
         pred = 1.0 / resize_disparity(disp, *gt.shape)
         valid_pairs.append((gt[mask], pred[mask]))
         scales[i] = frame_scale(gt, pred, mask)  # NaN: no valid pixel, the frame is skipped
@@ -252,11 +263,12 @@ def evaluate_depth(
     per_frame = {}
     for i in evaluated:
         gt, pred = valid_pairs[i]
-        pred = np.clip(pred * factors[i], MIN_DEPTH, MAX_DEPTH)
+        pred = np.clip(pred * factors[i], *(depth_range or (MIN_DEPTH, MAX_DEPTH)))
         per_frame[int(i)] = compute_depth_metrics(gt, pred)
 
     result: dict = {k: float(np.mean([m[k] for m in per_frame.values()])) for k in METRIC_NAMES}
     result.update(scaling=scaling, scale_factor=scale_factor, crop=crop, n_frames=int(evaluated.size))
+    result.update(depth_range=None if depth_range is None else list(depth_range))
     result.update(scale_consistency(scales, sequences))
     for name, stats in result["per_sequence"].items():
         stats["abs_rel"] = float(np.mean([m["abs_rel"] for i, m in per_frame.items() if sequences[i] == name]))

@@ -1,0 +1,225 @@
+"""``posecons prepare-rgbd``: an RGB-D sequence (colour frames, depth images and, if known, a camera pose
+per frame, as Kinect, RealSense, TUM RGB-D, ScanNet or 7-Scenes record them) becomes the dataset of
+:mod:`.prepare` plus its ground truth: the depth maps in metres for ``evaluate-depth --gt-kind dense``
+and, with poses, a KITTI odometry view of the same frames for ``evaluate-pose``.
+
+Files are found by patterns with one ``*`` standing for the frame's name, relative to the input folder
+(7-Scenes: ``frame-*.color.jpg``, ``frame-*.depth.png``, ``frame-*.pose.txt``). The colour frames,
+sorted by name (numerically when every name is a number), are the sequence; each one's depth image and
+pose file have the same name. With ``max_time_difference`` the names are timestamps in seconds (TUM
+RGB-D: ``rgb/*.png``, ``depth/*.png``), and each colour frame takes the depth image and pose of the
+nearest timestamp no further away than that, as TUM's ``associate.py`` pairs them. Poses come from one
+4 × 4 camera → world file per frame or from a TUM trajectory file (``t tx ty tz qx qy qz qw``).
+
+Every frame is kept (no static-frame test: each has its ground truth) unless ``every`` keeps one in N;
+a frame's depth image and pose are those of the colour frame it is.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ..errors import PoseconsError
+from ..fileio import keep_copy, output_dir
+from .calib import format_calib
+from .gt import read_depth_image, write_gt
+from .io import load_rgb
+from .prepare import drive_folder, write_calibration, write_train_val
+from .splits import SplitLine, write_split
+from .trajectory_io import check_rigid, read_pose_matrix, read_tum, write_kitti_poses
+
+INVALID_DEPTH = (0, 65535)  # what Kinect-style 16-bit depth PNGs hold where nothing was measured
+GT_FILE = "gt_depths.npz"
+SEQUENCE = "00"  # the odometry view's sequence number
+
+
+def _check_pattern(pattern: str, option: str) -> None:
+    if pattern.count("*") != 1 or any(c in pattern for c in "?[]"):
+        raise PoseconsError(f"{option} {pattern!r}: needs exactly one * (the frame's name) and no other wildcard")
+
+
+def _names(root: Path, pattern: str) -> dict[str, Path]:
+    """{frame name: file} of the files under ``root`` that match ``pattern`` (its ``*`` is the name)."""
+    prefix, suffix = pattern.split("*")
+    found = {}
+    for path in filter(Path.is_file, root.glob(pattern)):
+        text = path.relative_to(root).as_posix()
+        found[text[len(prefix) : len(text) - len(suffix)]] = path
+    return found
+
+
+def _seconds(names: Sequence[str], what: str) -> np.ndarray:
+    """Frame names read as timestamps in seconds, for pairing files by time."""
+    times = []
+    for name in names:
+        try:
+            times.append(float(name))
+        except ValueError:
+            raise PoseconsError(
+                f"{what} {name!r}: not a timestamp in seconds, which pairing by time needs "
+                "(--max-time-difference, --tum-poses)"
+            ) from None
+    return np.array(times)
+
+
+def nearest_within(targets: np.ndarray, times: np.ndarray, max_difference: float) -> list[Optional[int]]:
+    """For each target time, the index of the nearest of ``times`` (any order), or None when even that
+    one is more than ``max_difference`` away."""
+    order = np.argsort(times)
+    ordered = times[order]
+    right = np.clip(np.searchsorted(ordered, targets), 0, len(times) - 1)
+    left = np.clip(right - 1, 0, len(times) - 1)
+    best = np.where(np.abs(ordered[left] - targets) <= np.abs(ordered[right] - targets), left, right)
+    return [int(order[b]) if abs(ordered[b] - t) <= max_difference else None for b, t in zip(best, targets)]
+
+
+def _partners(
+    root: Path,
+    frames: dict[str, Path],
+    names: Sequence[str],
+    pattern: str,
+    option: str,
+    what: str,
+    max_difference: Optional[float],
+) -> list[Path]:
+    """The ``pattern`` file of each of the colour ``frames`` called ``names``: the one of the same
+    name or, with ``max_difference``, of the nearest timestamp."""
+    if max_difference is None:
+        paths = [root / pattern.replace("*", name) for name in names]
+        for name, path in zip(names, paths):
+            if not path.is_file():
+                raise PoseconsError(f"{path}: {what} of {frames[name].name} not found ({option} {pattern!r})")
+        return paths
+    files = _names(root, pattern)
+    if not files:
+        raise PoseconsError(f"{root / pattern}: no {what} files ({option})")
+    keys = list(files)
+    found = nearest_within(_seconds(names, "colour frame"), _seconds(keys, what), max_difference)
+    for name, index in zip(names, found):
+        if index is None:
+            raise PoseconsError(f"{frames[name]}: no {what} within {max_difference:g} s (--max-time-difference)")
+    return [files[keys[i]] for i in found]
+
+
+def read_rgbd_frames(
+    root: Path,
+    color: str,
+    depth: str,
+    poses: Optional[str] = None,
+    tum_poses: Optional[Path] = None,
+    max_time_difference: Optional[float] = None,
+    every: int = 1,
+) -> tuple[list[Path], list[Path], Optional[np.ndarray]]:
+    """Every ``every``-th colour frame of the sequence and its depth image and (N, 4, 4) camera → world
+    pose (None without ``poses`` and ``tum_poses``): (colour files, depth files, poses), all checked to
+    exist, the poses to be rigid."""
+    root = Path(root)
+    if not root.is_dir():
+        raise PoseconsError(f"{root}: input folder not found")
+    for pattern, option in ((color, "--color"), (depth, "--depth"), (poses, "--poses")):
+        if pattern is not None:
+            _check_pattern(pattern, option)
+    frames = _names(root, color)
+    if not frames:
+        raise PoseconsError(f"{root / color}: no colour frames (--color)")
+    try:
+        names = sorted(frames, key=float)
+    except ValueError:
+        names = sorted(frames)
+    names = names[::every]
+    colors = [frames[name] for name in names]
+    depths = _partners(root, frames, names, depth, "--depth", "depth image", max_time_difference)
+    if poses is not None:
+        files = _partners(root, frames, names, poses, "--poses", "pose file", max_time_difference)
+        return colors, depths, np.stack([read_pose_matrix(f) for f in files])
+    if tum_poses is None:
+        return colors, depths, None
+    stamps, trajectory = read_tum(tum_poses)
+    found = nearest_within(_seconds(names, "colour frame"), stamps, max_time_difference or 0.0)
+    for name, index in zip(names, found):
+        if index is None:
+            when = f"within {max_time_difference:g} s of" if max_time_difference else "at"
+            raise PoseconsError(f"{tum_poses}: no pose {when} the time of {frames[name]}")
+    for index in found:
+        check_rigid(trajectory[index], f"{tum_poses} (t = {stamps[index]:.6f})")
+    return colors, depths, trajectory[found]
+
+
+def prepare_rgbd(
+    root: Path,
+    out: Path,
+    intrinsics: np.ndarray,
+    color: str,
+    depth: str,
+    depth_scale: float,
+    invalid_depth: Sequence[float] = INVALID_DEPTH,
+    poses: Optional[str] = None,
+    tum_poses: Optional[Path] = None,
+    max_time_difference: Optional[float] = None,
+    every: int = 1,
+    val_fraction: float = 0.1,
+    seed: int = 0,
+) -> dict:
+    """Write the dataset of the sequence in ``root`` (module doc; files as :func:`read_rgbd_frames`
+    finds them); ``intrinsics`` is the (3, 3) pixel K of the colour frames, ``depth_scale`` the depth
+    images' values per metre (1000: millimetres), ``invalid_depth`` the values that mean no measurement.
+    Returns the description also written to ``rgbd.json``."""
+    if not (np.isfinite(depth_scale) and depth_scale > 0):
+        raise PoseconsError(f"--depth-scale {depth_scale}: must be a number > 0 (depth image values per metre)")
+    k = np.asarray(intrinsics, dtype=np.float64)
+    colors, depths, trajectory = read_rgbd_frames(root, color, depth, poses, tum_poses, max_time_difference, every)
+    if len(colors) < 3:
+        raise PoseconsError(f"{Path(root) / color}: only {len(colors)} frames kept (need at least 3)")
+    folder, size, maps = drive_folder(0), None, []
+    with output_dir(out) as tmp:
+        data = tmp / folder / "image_02" / "data"
+        data.mkdir(parents=True)
+        for index, (color_file, depth_file) in enumerate(zip(colors, depths)):
+            img = load_rgb(color_file, None if size is None else (colors[0], size))
+            size = img.size
+            gt = read_depth_image(depth_file, depth_scale, invalid_depth)
+            if gt.shape != (size[1], size[0]):
+                raise PoseconsError(
+                    f"{depth_file}: depth image is {gt.shape[1]}×{gt.shape[0]} pixels but its colour frame "
+                    f"{color_file} is {size[0]}×{size[1]}; ground truth must be registered to the colour frame"
+                )
+            img.save(data / f"{index:010d}.png", compress_level=1)
+            maps.append(gt)
+        write_calibration(tmp, k, size)
+        lines = [SplitLine(folder, f, "l") for f in range(len(colors))]
+        n_val = write_train_val(tmp, lines[1:-1], val_fraction, seed)  # lines with both neighbours
+        write_split(tmp / "splits" / "custom" / "test_files.txt", lines, frame_digits=10)
+        write_gt(tmp / GT_FILE, maps, lines)
+        if trajectory is not None:
+            sequence = tmp / "odometry" / "sequences" / SEQUENCE
+            for index in range(len(colors)):
+                keep_copy(data / f"{index:010d}.png", sequence / "image_2" / f"{index:06d}.png")
+            p2 = np.concatenate([k, np.zeros((3, 1))], axis=1)
+            (sequence / "calib.txt").write_text(format_calib({"P2": p2.ravel()}, calib_time=None))
+            write_kitti_poses(tmp / "odometry" / "poses" / f"{SEQUENCE}.txt", trajectory)
+        info = {
+            "source": str(Path(root).resolve()),
+            "frames": [c.relative_to(root).as_posix() for c in colors],
+            "depth_images": [d.relative_to(root).as_posix() for d in depths],
+            "poses": poses or (str(tum_poses) if tum_poses else None),
+            "every": every,
+            "max_time_difference": max_time_difference,
+            "depth_scale": depth_scale,
+            "invalid_depth": list(invalid_depth),
+            "width": size[0],
+            "height": size[1],
+            "intrinsics_px": dict(zip(("fx", "fy", "cx", "cy"), k[[0, 1, 0, 1], [0, 1, 2, 2]].tolist())),
+            "drive": folder,
+            "train": len(colors) - 2 - n_val,
+            "val": n_val,
+            "test_split": "splits/custom/test_files.txt",
+            "ground_truth": GT_FILE,
+            "odometry_sequence": None if trajectory is None else SEQUENCE,
+        }
+        (tmp / "rgbd.json").write_text(json.dumps(info, indent=2) + "\n")
+    return info
