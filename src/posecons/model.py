@@ -71,7 +71,7 @@ class PoseConsModel(nn.Module):
         m = config.model
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
         self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
-        self.pose_net = PoseNet(m.num_layers, imagenet, m.constraint_norm, m.pose_mirror)
+        self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror)
         # How the encoders were initialised, for the run's config, checkpoints and reports.
         self.initialisation = (
             f"ImageNet ({imagenet_weights_name(m.num_layers)})"

@@ -54,7 +54,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from ..checkpoint import load_checkpoint, save_checkpoint
-from ..config import Config
+from ..config import Config, without_retired
 from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
@@ -350,7 +350,7 @@ class Trainer:
                 "needs the checkpoints/last.pt that a run writes"
             )
         saved, requested = (
-            _without_imagenet(state["config"])["model"],
+            _without_imagenet(without_retired(state["config"]))["model"],  # a run from before a removal resumes
             _without_imagenet(self.config.to_dict())["model"],
         )
         if saved != requested:
