@@ -39,7 +39,6 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     ),
     "loss.ssim_weight": _FRACTION,
     "loss.identity_fraction": _FRACTION,
-    "loss.constraint_fraction": (lambda v: 0 < v <= 1, "must be in (0, 1]"),
     "loss.smoothness_weight": _at_least(0),
     "loss.fb_weight": _at_least(0),
     "loss.id_weight": _at_least(0),
@@ -73,6 +72,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
 # which is accepted and dropped; any other value needs the commit named, the last to have the option.
 RETIRED = {  # "section.key": (the value every run now has, that commit)
     "model.constraint_norm": ("own", "1be435b"),
+    "loss.constraint_fraction": (1.0, "1be435b"),
 }
 
 
@@ -103,9 +103,6 @@ class LossConfig:
     cyc_weight: float = 0.1
     constraint_start_step: int = 0  # the authors' released code waited 2000 steps
     identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
-    # Share of each batch's samples that get the constraint pairs, in (0, 1]: k = max(1, round(f·B))
-    # drawn per step (the same for every constraint); 1.0 = the whole batch, as the paper.
-    constraint_fraction: float = 1.0
     translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
     # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
     # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was

@@ -67,8 +67,7 @@ class GroupedBatchNorm2d(nn.BatchNorm2d):
     The pose net sees every pair of a step in one batch (temporal pairs first, then the
     constraints' reversed, identity and skip pairs): grouping keeps the constraint pairs from
     changing the warping poses, and tracking only the temporal pairs keeps them out of the
-    statistics used at evaluation. Groups may differ in size (the constraints of
-    ``loss.constraint_fraction`` < 1 see a subset of the batch). In eval mode it is a plain BatchNorm2d.
+    statistics used at evaluation. Groups may differ in size. In eval mode it is a plain BatchNorm2d.
     """
 
     sizes: tuple[int, ...] = ()  # () or one group: the whole batch
