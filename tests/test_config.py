@@ -74,7 +74,12 @@ def test_val_every_spellings(value, meaning):
 
 
 @pytest.mark.parametrize(
-    "key,kept,other", [("model.constraint_norm", "own", "temporal"), ("loss.constraint_fraction", 1.0, 0.5)]
+    "key,kept,other",
+    [
+        ("model.constraint_norm", "own", "temporal"),
+        ("loss.constraint_fraction", 1.0, 0.5),
+        ("loss.translation_norm", "sum", "mean"),
+    ],
 )
 def test_a_stored_config_with_a_retired_option_loads_at_its_kept_value_only(tmp_path, key, kept, other):
     """A checkpoint's or a run's config from before an option was removed still loads, and is today's

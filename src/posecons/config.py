@@ -73,6 +73,7 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
 RETIRED = {  # "section.key": (the value every run now has, that commit)
     "model.constraint_norm": ("own", "1be435b"),
     "loss.constraint_fraction": (1.0, "1be435b"),
+    "loss.translation_norm": ("sum", "1be435b"),
 }
 
 
@@ -103,7 +104,6 @@ class LossConfig:
     cyc_weight: float = 0.1
     constraint_start_step: int = 0  # the authors' released code waited 2000 steps
     identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
-    translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
     # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
     # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was
     depth_consistency_weight: float = 0.0
@@ -210,8 +210,6 @@ class Config:
                 "the cyc constraint needs model.frame_ids to hold a past and a future frame, "
                 f"e.g. [0, -1, 1]; got {m.frame_ids}"
             )
-        if lo.translation_norm not in ("sum", "mean"):
-            raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
         if self.train.precision not in ("32", "bf16", "16", "auto"):
             raise PoseconsError(f"train.precision must be '32', 'bf16', '16' or 'auto', got {self.train.precision!r}")
         if self.train.best_metric not in ("val_photometric", "abs_rel"):

@@ -150,7 +150,6 @@ class PoseConsModel(nn.Module):
                 losses["fb"] = forward_backward_loss(
                     torch.cat([poses[f] for f in sources]),
                     torch.cat([P.T(0, f, input=temporal(f)[::-1]) for f in sources]),
-                    lo.translation_norm,
                 )
             if "id" in constraints:  # ‖e‖₁ + ‖t‖₁ of pose(I_0, I_0)
                 losses["id"] = identity_loss(*P.vector(0, 0))
@@ -160,7 +159,6 @@ class PoseConsModel(nn.Module):
                     P.T(nxt, prev, input=(prev, nxt)),
                     P.T(nxt, 0, input=temporal(nxt)),
                     P.T(0, prev, input=temporal(prev)),
-                    lo.translation_norm,
                 )
             terms = list(constraints)
             if lo.depth_consistency_weight > 0:
