@@ -6,9 +6,9 @@ import torch
 import torch.nn as nn
 
 from posecons.config import load_config
-from posecons.geometry import invert_pose, pose_distance, pose_vec_to_mat
+from posecons.geometry import pose_vec_to_mat
 from posecons.losses import cycle_loss, forward_backward_loss, identity_loss
-from posecons.model import PairPoses, PoseConsModel, constraint_sample_count, temporal
+from posecons.model import PairPoses, PoseConsModel, temporal
 
 H, W = 64, 96
 ALL = ["fb", "id", "cyc"]
@@ -158,15 +158,11 @@ def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32(dc_we
     losses["total"].backward()
 
 
-@pytest.mark.parametrize(
-    "constraints,b,fraction",
-    [(["fb"], 3, 1.0), (["id"], 3, 1.0), (["cyc"], 3, 1.0), (ALL, 3, 1.0), (ALL, 4, 0.5), (ALL, 3, 0.2)],
-)
-def test_constraint_pairs_do_not_change_the_warping_poses_or_running_statistics(constraints, b, fraction):
-    """Also when the constraints see a subset of the batch (loss.constraint_fraction < 1)."""
+@pytest.mark.parametrize("constraints,b", [(["fb"], 3), (["id"], 3), (["cyc"], 3), (ALL, 3)])
+def test_constraint_pairs_do_not_change_the_warping_poses_or_running_statistics(constraints, b):
     torch.manual_seed(3)
     plain = PoseConsModel(make_config())
-    constrained = PoseConsModel(make_config(constraints, **{"loss.constraint_fraction": fraction}))
+    constrained = PoseConsModel(make_config(constraints))
     constrained.load_state_dict(plain.state_dict())
     batch = random_batch(b=b)
     out_plain, _ = plain(batch)
@@ -311,7 +307,7 @@ def test_depth_consistency_runs_one_depth_pass_over_all_frames_only_when_on():
     assert loss_on["photometric"].item() == pytest.approx(loss_off["photometric"].item(), rel=1e-5)
 
 
-def test_constraint_fraction_one_is_the_whole_batch_bit_for_bit():
+def test_constraint_losses_are_over_the_whole_batch_bit_for_bit():
     torch.manual_seed(3)
     model = PoseConsModel(make_config(ALL))
     today = copy.deepcopy(model)
@@ -329,55 +325,8 @@ def test_constraint_fraction_one_is_the_whole_batch_bit_for_bit():
     assert torch.equal(losses["fb"], forward_backward_loss(torch.cat([fwd[-1], fwd[1]]), torch.cat([bwd[-1], bwd[1]])))
     assert torch.equal(losses["id"], identity_loss(*P.vector(0, 0)))
     assert torch.equal(losses["cyc"], cycle_loss(P.T(1, -1, input=(-1, 1)), fwd[1], P.T(0, -1, input=(-1, 0))))
-    # ... and no random draw for a subset: the RNG stream is that of a model without constraints.
+    # ... and no random draw: the RNG stream is that of a model without constraints.
     plain = PoseConsModel(make_config())
     torch.manual_seed(7)
     plain(batch)
     assert torch.equal(torch.get_rng_state(), rng_after)
-
-
-def test_constraint_losses_are_means_over_the_drawn_subset():
-    torch.manual_seed(6)
-    model = PoseConsModel(make_config(ALL, **{"loss.constraint_fraction": 0.5}))
-    by_hand = copy.deepcopy(model)
-    drawn, draw = [], model.constraint_samples
-    model.constraint_samples = lambda n, device: drawn.append(draw(n, device)) or drawn[-1]
-    batch = random_batch(b=4)
-    _, losses = model(batch)
-    (sub,) = drawn  # one draw per step, shared by the three constraints
-    assert len(sub) == 2 and not torch.equal(sub, torch.arange(2))  # a subset the test can tell from the first k
-
-    def pose(i: int, j: int, rows) -> torch.Tensor:  # T_{j←i} from its own pose-net call on the samples `rows`
-        index = (0, -1, 1)
-        return pose_vec_to_mat(
-            *by_hand.pose_net(batch["frames"][rows, index.index(i)], batch["frames"][rows, index.index(j)])
-        )
-
-    everyone = slice(None)
-    fwd = {-1: invert_pose(pose(-1, 0, everyone))[sub], 1: pose(0, 1, everyone)[sub]}  # T_{f←0}, whole-batch BN
-    bwd = {-1: invert_pose(pose(0, -1, sub)), 1: pose(1, 0, sub)}  # T_{0←f} from the reversed pairs
-    fb = (pose_distance(fwd[-1], invert_pose(bwd[-1])).mean() + pose_distance(fwd[1], invert_pose(bwd[1])).mean()) / 2
-    aa, t = by_hand.pose_net(batch["frames"][sub, 0], batch["frames"][sub, 0])
-    cyc = pose_distance(pose(-1, 1, sub), fwd[1] @ invert_pose(fwd[-1])).mean()
-    assert torch.allclose(losses["fb"], fb, rtol=1e-4, atol=1e-7)
-    assert torch.allclose(losses["id"], (aa.abs().sum((1, 2)) + t.abs().sum((1, 2))).mean(), rtol=1e-4, atol=1e-7)
-    assert torch.allclose(losses["cyc"], cyc, rtol=1e-4, atol=1e-7)
-
-
-@pytest.mark.parametrize(
-    "b,fraction,k", [(1, 0.5, 1), (1, 1e-9, 1), (12, 1e-9, 1), (12, 0.5, 6), (12, 0.3, 4), (3, 0.5, 2), (12, 1.0, 12)]
-)
-def test_constraint_sample_count_and_draws(b, fraction, k):
-    assert constraint_sample_count(b, fraction) == k  # max(1, round(f·B)): 0.3·12 = 3.6 → 4, 1.5 → 2
-    model = PoseConsModel(make_config(ALL, **{"loss.constraint_fraction": fraction}))
-    torch.manual_seed(11)
-    draws = [model.constraint_samples(b, torch.device("cpu")) for _ in range(6)]
-    if fraction == 1.0:
-        assert draws == [slice(None)] * 6
-        return
-    for sub in draws:  # k distinct samples of the batch, sorted
-        assert len(sub) == k and sub.unique().tolist() == sub.tolist() and 0 <= sub.min() and sub.max() < b
-    torch.manual_seed(11)  # reproducible from torch's generator (saved in checkpoints)
-    assert all(torch.equal(x, model.constraint_samples(b, torch.device("cpu"))) for x in draws)
-    if 1 < k < b:
-        assert any(not torch.equal(draws[0], x) for x in draws[1:])  # a new subset each step

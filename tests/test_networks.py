@@ -2,8 +2,6 @@ from urllib.error import URLError
 
 import pytest
 import torch
-import torch.nn as nn
-import torch.nn.functional as F
 import torchvision.models as tvm
 
 from posecons import networks
@@ -87,27 +85,6 @@ def test_grouped_pose_batch_equals_separate_calls_and_tracks_only_the_first_grou
     third = PoseNet(10)
     third.load_state_dict(batched.state_dict())
     assert torch.allclose(t[4:], third(a[2], b[2])[1], atol=1e-6)
-
-
-def test_constraint_groups_can_use_the_temporal_groups_statistics():
-    torch.manual_seed(2)
-    bn = networks.GroupedBatchNorm2d(4).train()
-    nn.init.uniform_(bn.weight, 0.5, 2)
-    nn.init.uniform_(bn.bias, -1, 1)
-    bn.sizes, bn.tracked, bn.reference = (2, 2, 2), 2, "temporal"
-    x = torch.randn(6, 4, 5, 7) * 3 + 1
-    out = bn(x)
-    # The temporal groups are normalised on their own, as in "own" mode ...
-    own = networks.GroupedBatchNorm2d(4).train()
-    own.load_state_dict(bn.state_dict())
-    own.sizes, own.tracked = (2, 2, 2), 2
-    assert torch.allclose(out[:4], own(x)[:4], atol=1e-6)
-    # ... and the constraint group with the mean and biased variance of both temporal groups together.
-    pooled = x[:4].transpose(0, 1).flatten(1)
-    mean, var = pooled.mean(1), pooled.var(1, unbiased=False)
-    expected = F.batch_norm(x[4:], mean, var, bn.weight, bn.bias, False, 0.0, bn.eps)
-    assert torch.allclose(out[4:], expected, atol=1e-5)
-    assert not torch.allclose(out[4:], own(x)[4:], atol=1e-2)  # its own statistics would differ
 
 
 @pytest.mark.parametrize("train", [False, True])

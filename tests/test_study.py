@@ -17,7 +17,7 @@ from filelock import FileLock
 
 from posecons.checkpoint import load_checkpoint
 from posecons.cli import main
-from posecons.config import load_config, preset_names, resolve_preset
+from posecons.config import STUDY_SPECS, load_config, preset_names, resolve_preset
 from posecons.errors import PoseconsError
 from posecons.study import report, runner
 from posecons.study.spec import load_spec
@@ -25,6 +25,7 @@ from posecons.training.trainer import Trainer, save_initial_weights
 
 SYNTH = {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}
 TINY = ["model.width=128", "train.max_steps=3", "train.batch_size=2", "train.val_every=off"]
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments" / "specs"  # the investigation's specs, run as files
 
 
 def write_spec(path: Path, **changes) -> Path:
@@ -245,7 +246,7 @@ def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     r_err and fill those columns from rpe_trans / rpe_rot (catches LEGACY_POSE_KEYS dropped or its
     factor of 100 for °/m → °/100 m lost)."""
     report = tmp_path / "r.md"
-    argv = ["study", "--report-only", "--spec", "study/synth_norm", "--variants", "cyc", "--seeds", "0", "1"]
+    argv = ["study", "--report-only", "--spec", "study/synth", "--variants", "cyc", "--seeds", "0", "1"]
     assert (
         main([*argv, "--results", str(Path(__file__).parents[1] / "docs/results/study/json"), "--report", str(report)])
         == 0
@@ -325,25 +326,25 @@ def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp
 
 
 def test_spec_checks_and_bundled_specs(tmp_path):
-    """Bundled specs are valid and are no training presets; a spec's problems name the spec file."""
-    for name in ("synth", "synth_norm", "kitti_gpu"):
-        copy = resolve_preset("synth/demo").parents[1] / "study" / f"{name}.yaml"
+    """Bundled and experiments/ specs are valid, bundled ones are no training presets; a spec's problems
+    name the spec file."""
+    for name in ("synth", "kitti_gpu"):
+        copy = STUDY_SPECS / f"{name}.yaml"
         spec = load_spec(copy, data_path=tmp_path if name == "kitti_gpu" else None)
         assert spec.reference == "baseline" and spec.seeds == [0, 1, 2]
         assert spec.config("baseline", 2).loss.constraints == [] and spec.config("cyc", 1).train.seed == 1
     assert load_spec(copy, data_path=tmp_path).data["test_split"].endswith("eigen/test_files.txt")
-    # synth_norm shares its baseline and cyc runs with a synth study folder: same data, same runs.
-    synth, norm = (load_spec(copy.with_name(f"{n}.yaml")) for n in ("synth", "synth_norm"))
-    assert norm.data == synth.data and norm.preset_file == synth.preset_file
-    assert all(norm.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in ("baseline", "cyc"))
-    assert norm.config("cyc_temporal", 0).model.constraint_norm == "temporal"
+    synth = load_spec(copy.with_name("synth.yaml"))
+    # synth_norm's cyc_temporal needs model.constraint_norm, removed: the spec runs at the commit named.
+    with pytest.raises(PoseconsError, match="synth_norm.yaml: variant 'cyc_temporal': .* at commit 1be435b"):
+        load_spec(EXPERIMENTS / "synth_norm.yaml")
     # synth_ema and synth_dc likewise share study/synth's runs of the variants they name.
     for name, shared in (("synth_ema", ["baseline"]), ("synth_dc", ["baseline", "dc"])):
-        other = load_spec(copy.with_name(f"{name}.yaml"))
+        other = load_spec(EXPERIMENTS / f"{name}.yaml")
         assert other.data == synth.data and other.preset_file == synth.preset_file
         assert all(other.run_overrides(v, 0) == synth.run_overrides(v, 0) for v in shared)
     # synth_bf16 is study/synth in bf16 with an EMA, nothing else: same data, variants and losses.
-    fast = load_spec(copy.with_name("synth_bf16.yaml"))
+    fast = load_spec(EXPERIMENTS / "synth_bf16.yaml")
     assert fast.data == synth.data and list(fast.variants) == list(synth.variants) and fast.seeds == synth.seeds
     for v in synth.variants:
         a, b = fast.config(v, 1), synth.config(v, 1)
@@ -357,7 +358,7 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         assert a.train.max_steps == 500 < b.train.max_steps and b.train.checkpoint_every == 100
         b.train.max_steps = 500
         assert a.to_dict() == b.to_dict()
-    ema = load_spec(copy.with_name("synth_ema.yaml"))
+    ema = load_spec(EXPERIMENTS / "synth_ema.yaml")
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss
     subset = spec.select(["cyc", "baseline"], [3, 4, 5])  # the spec's order: the reference stays first

@@ -1,4 +1,4 @@
-"""tools/at_steps.py: a study run's weights are kept at the asked steps only, without the training
+"""experiments/tools/at_steps.py: a study run's weights are kept at the asked steps only, without the training
 state, once per checkpoint write; a folder that is no study is one line and exit status 2."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import torch
 
 from posecons.checkpoint import load_checkpoint
 
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
+TOOLS = Path(__file__).resolve().parents[1] / "experiments" / "tools"
 spec = importlib.util.spec_from_file_location("at_steps", TOOLS / "at_steps.py")
 at_steps = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(at_steps)

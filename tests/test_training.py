@@ -164,10 +164,10 @@ def test_persistent_loader_workers_draw_each_epochs_augmentation(synth_data, tmp
 
 def test_validation_changes_neither_training_nor_computes_constraints(synth_data, tmp_path):
     """The weights after 6 steps are the same with a validation every 2 steps as with none, in a run
-    whose identity fraction and constraint subset draw from torch's RNG; validation computes no
+    whose identity fraction draws from torch's RNG; validation computes no
     constraint loss. Caught mutations: ``Validator.run`` without ``torch.random.fork_rng`` (weights
     differ); validation calling the model with ``with_constraints=True`` (constraint losses seen)."""
-    sets = ["loss.constraints=[fb,id,cyc]", "loss.identity_fraction=0.5", "loss.constraint_fraction=0.5"]
+    sets = ["loss.constraints=[fb,id,cyc]", "loss.identity_fraction=0.5"]
     weights, losses = {}, {True: set(), False: set()}  # loss names by model.training
     for every in ("off", "2"):
         cfg = tiny_config(*sets, "train.max_steps=6", f"train.val_every={every}")
@@ -388,9 +388,7 @@ def final_weights(run: Path) -> dict:
 
 def test_killed_run_resumes_to_identical_weights(synth_data, tmp_path):
     args = ["train", "--config", str(tmp_path / "c.yaml"), "--data-path", str(synth_data), "--quiet"]
-    (tmp_path / "c.yaml").write_text(
-        "loss:\n  constraints: [fb, id, cyc]\n  identity_fraction: 0.5\n  constraint_fraction: 0.5\n"
-    )
+    (tmp_path / "c.yaml").write_text("loss:\n  constraints: [fb, id, cyc]\n  identity_fraction: 0.5\n")
     sets = sum(
         [
             ["--set", s]

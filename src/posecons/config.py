@@ -39,7 +39,6 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     ),
     "loss.ssim_weight": _FRACTION,
     "loss.identity_fraction": _FRACTION,
-    "loss.constraint_fraction": (lambda v: 0 < v <= 1, "must be in (0, 1]"),
     "loss.smoothness_weight": _at_least(0),
     "loss.fb_weight": _at_least(0),
     "loss.id_weight": _at_least(0),
@@ -68,6 +67,15 @@ RANGES = {  # "section.key": (test, what a valid value is); every float must als
     "train.ema_decay": (lambda v: 0 <= v < 1, "must be in [0, 1)"),
 }
 
+# Options an investigation tried and did not keep (experiments/README.md). The configs stored before
+# their removal (checkpoints, runs' config.yaml) hold them at the one value the code still implements,
+# which is accepted and dropped; any other value needs the commit named, the last to have the option.
+RETIRED = {  # "section.key": (the value every run now has, that commit)
+    "model.constraint_norm": ("own", "1be435b"),
+    "loss.constraint_fraction": (1.0, "1be435b"),
+    "loss.translation_norm": ("sum", "1be435b"),
+}
+
 
 @dataclass
 class ModelConfig:
@@ -79,9 +87,6 @@ class ModelConfig:
     max_depth: float = 100.0
     scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])  # decoder outputs at 1/2^s size; any of 0-3
     frame_ids: list[int] = field(default_factory=lambda: [0, -1, 1])  # target first, then sources
-    # BatchNorm statistics of the pose net's constraint pairs in training: "own" (each pair group its own, as
-    # separate pose-net calls would give) or "temporal" (the temporal pairs' statistics of the same step)
-    constraint_norm: str = "own"
     # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
     # mirror-equivariant by construction (sideways motion, yaw and roll cannot hold a constant bias)
     pose_mirror: bool = False
@@ -99,10 +104,6 @@ class LossConfig:
     cyc_weight: float = 0.1
     constraint_start_step: int = 0  # the authors' released code waited 2000 steps
     identity_fraction: float = 1.0  # fraction of batches that get the identity constraint
-    # Share of each batch's samples that get the constraint pairs, in (0, 1]: k = max(1, round(f·B))
-    # drawn per step (the same for every constraint); 1.0 = the whole batch, as the paper.
-    constraint_fraction: float = 1.0
-    translation_norm: str = "sum"  # ‖t_T - t_P‖₁ as a "sum" (paper) or "mean" over xyz
     # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
     # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was
     depth_consistency_weight: float = 0.0
@@ -197,8 +198,6 @@ class Config:
             raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
         if m.num_layers not in (10, 18, 34, 50):
             raise PoseconsError(f"model.num_layers must be 10, 18, 34 or 50, got {m.num_layers}")
-        if m.constraint_norm not in ("own", "temporal"):
-            raise PoseconsError(f"model.constraint_norm must be 'own' or 'temporal', got {m.constraint_norm!r}")
         if m.pretrained not in (True, False, "auto"):
             raise PoseconsError(f"model.pretrained must be true, false or 'auto', got {m.pretrained!r}")
         if not m.frame_ids or m.frame_ids[0] != 0 or len(set(m.frame_ids)) != len(m.frame_ids):
@@ -211,8 +210,6 @@ class Config:
                 "the cyc constraint needs model.frame_ids to hold a past and a future frame, "
                 f"e.g. [0, -1, 1]; got {m.frame_ids}"
             )
-        if lo.translation_norm not in ("sum", "mean"):
-            raise PoseconsError(f"loss.translation_norm must be 'sum' or 'mean', got {lo.translation_norm!r}")
         if self.train.precision not in ("32", "bf16", "16", "auto"):
             raise PoseconsError(f"train.precision must be '32', 'bf16', '16' or 'auto', got {self.train.precision!r}")
         if self.train.best_metric not in ("val_photometric", "abs_rel"):
@@ -274,6 +271,8 @@ def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
     names = {f.name for f in dataclasses.fields(obj)}
     for key, value in updates.items():
         full = f"{prefix}{key}"
+        if key not in names and _retired(full, value):
+            continue
         if key not in names:
             raise PoseconsError(f"unknown config key {full!r}; known: {sorted(names)}")
         current = getattr(obj, key)
@@ -283,6 +282,30 @@ def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
             _merge(current, value, full + ".")
         else:
             setattr(obj, key, _check_type(value, hints[key], full))
+
+
+def _retired(key: str, value: Any) -> bool:
+    """True for a retired option at the value every run now has (nothing to set); an error for another."""
+    if key not in RETIRED:
+        return False
+    kept, commit = RETIRED[key]
+    if value != kept:
+        raise PoseconsError(
+            f"config key {key} was removed (experiments/README.md): every run now has {kept!r}; "
+            f"{value!r} needs posecons at commit {commit}"
+        )
+    return True
+
+
+def without_retired(data: dict[str, Any]) -> dict[str, Any]:
+    """A copy of a stored config dict without the retired keys it holds at their kept value (an
+    error for another value), to compare with today's ``Config.to_dict()``."""
+    out = {}
+    for section, values in data.items():
+        if isinstance(values, dict):
+            values = {k: v for k, v in values.items() if not _retired(f"{section}.{k}", v)}
+        out[section] = values
+    return out
 
 
 def _read_preset(path: Path, seen: tuple[Path, ...] = ()) -> list[dict[str, Any]]:

@@ -83,15 +83,13 @@ def pose_vec_to_mat(axisangle: torch.Tensor, translation: torch.Tensor, invert: 
     return make_pose(rot, t)
 
 
-def pose_distance(T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum") -> torch.Tensor:
+def pose_distance(T: torch.Tensor, P: torch.Tensor) -> torch.Tensor:
     """The paper's eq. 2, d(T, P), shape (B,): the sum of :func:`pose_distance_terms`."""
-    rot_term, trans_term = pose_distance_terms(T, P, translation_norm)
+    rot_term, trans_term = pose_distance_terms(T, P)
     return rot_term + trans_term
 
 
-def pose_distance_terms(
-    T: torch.Tensor, P: torch.Tensor, translation_norm: str = "sum"
-) -> tuple[torch.Tensor, torch.Tensor]:
+def pose_distance_terms(T: torch.Tensor, P: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """The two terms of the paper's eq. 2, d(T, P) = |1 − (tr(R_T R_Pᵀ) − 1)/2| + ‖t_T − t_P‖₁: the
     rotation term and the translation term, each (B,).
 
@@ -99,13 +97,11 @@ def pose_distance_terms(
     computed as ¼‖R_T − R_P‖²_F, which equals (3 − tr(R_T R_Pᵀ))/2 exactly for rotations and is
     never negative (so no abs): the trace form cancels catastrophically in float32 near
     agreement — where the constraints act — and there returns 0 or gradients of the wrong sign.
-    ``translation_norm="mean"`` averages |Δt| over xyz instead of summing.
     """
     check_tensor("T", T, (None, 4, 4))
     check_tensor("P", P, (T.shape[0], 4, 4))
     rot_term = 0.25 * (T[:, :3, :3] - P[:, :3, :3]).square().sum((-1, -2))
-    dt = (T[:, :3, 3] - P[:, :3, 3]).abs()
-    trans_term = dt.mean(-1) if translation_norm == "mean" else dt.sum(-1)
+    trans_term = (T[:, :3, 3] - P[:, :3, 3]).abs().sum(-1)
     return rot_term, trans_term
 
 

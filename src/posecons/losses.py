@@ -96,12 +96,12 @@ def depth_consistency_loss(
 # ----------------------------------------------------------------------------- pose constraints
 
 
-def forward_backward_loss(t_fwd: torch.Tensor, t_bwd: torch.Tensor, translation_norm: str = "sum") -> torch.Tensor:
+def forward_backward_loss(t_fwd: torch.Tensor, t_bwd: torch.Tensor) -> torch.Tensor:
     """mean d(T_{f←0}, inverse(T_{0←f})): the pose of a pair and of the reversed pair must be inverses.
 
     t_fwd: T_{f←0} (B, 4, 4); t_bwd: T_{0←f} predicted from the reversed pair (B, 4, 4).
     """
-    return pose_distance(t_fwd, invert_pose(t_bwd), translation_norm).mean()
+    return pose_distance(t_fwd, invert_pose(t_bwd)).mean()
 
 
 def identity_loss(axisangle: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
@@ -111,9 +111,7 @@ def identity_loss(axisangle: torch.Tensor, translation: torch.Tensor) -> torch.T
     return (axisangle.abs().sum((1, 2)) + translation.abs().sum((1, 2))).mean()
 
 
-def cycle_loss(
-    t_skip: torch.Tensor, t_second: torch.Tensor, t_first: torch.Tensor, translation_norm: str = "sum"
-) -> torch.Tensor:
+def cycle_loss(t_skip: torch.Tensor, t_second: torch.Tensor, t_first: torch.Tensor) -> torch.Tensor:
     """mean d(T_{+1←−1}, T_{+1←0} · T_{0←−1}): the skip pose must equal the composed pair.
 
     Arguments in the formula's reading order: t_skip T_{+1←−1}, t_second T_{+1←0}, t_first
@@ -121,4 +119,4 @@ def cycle_loss(
     """
     check_tensor("t_second", t_second, (None, 4, 4))
     check_tensor("t_first", t_first, tuple(t_second.shape))
-    return pose_distance(t_skip, t_second @ t_first, translation_norm).mean()
+    return pose_distance(t_skip, t_second @ t_first).mean()

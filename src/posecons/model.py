@@ -54,11 +54,6 @@ class PairPoses:
         return pose_vec_to_mat(*self.vectors[tuple(input)], invert=tuple(input) == (dst, src))
 
 
-def constraint_sample_count(batch_size: int, fraction: float) -> int:
-    """How many samples of a batch get the constraint pairs: max(1, round(fraction · batch_size))."""
-    return max(1, round(fraction * batch_size))
-
-
 def temporal(f: int) -> tuple[int, int]:
     """The pose-net input pair for source f in temporal order (SPEC §1): (f, 0) if f < 0, else (0, f)."""
     return (min(f, 0), max(f, 0))
@@ -71,7 +66,7 @@ class PoseConsModel(nn.Module):
         m = config.model
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
         self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
-        self.pose_net = PoseNet(m.num_layers, imagenet, m.constraint_norm, m.pose_mirror)
+        self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror)
         # How the encoders were initialised, for the run's config, checkpoints and reports.
         self.initialisation = (
             f"ImageNet ({imagenet_weights_name(m.num_layers)})"
@@ -113,17 +108,6 @@ class PoseConsModel(nn.Module):
             pairs.append(self.cycle_ids())
         return pairs
 
-    def constraint_samples(self, batch_size: int, device: torch.device) -> slice | torch.Tensor:
-        """The batch samples that get this step's constraint pairs: all (``slice(None)``, no random
-        draw) when ``loss.constraint_fraction`` is 1, else k = max(1, round(f·B)) of them drawn
-        without replacement from torch's global generator (saved in checkpoints: exact resume),
-        as a sorted index tensor (k,) on ``device``."""
-        fraction = self.config.loss.constraint_fraction
-        if fraction >= 1:
-            return slice(None)
-        k = constraint_sample_count(batch_size, fraction)
-        return torch.randperm(batch_size)[:k].sort().values.to(device, non_blocking=True)
-
     def cycle_ids(self) -> tuple[int, int]:
         """(−n, +n): the nearest source on each side of the target (n = 1 for frames 0, −1, +1)."""
         sources = self.config.model.frame_ids[1:]
@@ -149,30 +133,23 @@ class PoseConsModel(nn.Module):
         else:
             disps = self.depth_net(net_frames[:, 0])
 
-        # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group:
-        # the temporal pairs for the whole batch, the constraint pairs for the samples `sub`.
+        # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group.
         constraints = self.active_constraints(step) if with_constraints else []
         pairs = self.pose_pairs(constraints)
-        n_temporal, batch_size = len(m.frame_ids) - 1, frames.shape[0]
-        sub = self.constraint_samples(batch_size, frames.device) if constraints else slice(None)
-        rows = [slice(None)] * n_temporal + [sub] * (len(pairs) - n_temporal)
-        a = torch.cat([net_frames[r, index[i]] for r, (i, _) in zip(rows, pairs)])
-        b = torch.cat([net_frames[r, index[j]] for r, (_, j) in zip(rows, pairs)])
-        k = batch_size if isinstance(sub, slice) else len(sub)
-        sizes = [batch_size] * n_temporal + [k] * (len(pairs) - n_temporal)
-        P = PairPoses(pairs, sizes, *self.pose_net(a, b, groups=sizes, tracked=n_temporal))
+        a = torch.cat([net_frames[:, index[i]] for i, _ in pairs])
+        b = torch.cat([net_frames[:, index[j]] for _, j in pairs])
+        sizes = [frames.shape[0]] * len(pairs)
+        P = PairPoses(pairs, sizes, *self.pose_net(a, b, groups=sizes, tracked=len(m.frame_ids) - 1))
 
         with torch.autocast(frames.device.type, enabled=False):
             sources = m.frame_ids[1:]
             poses = {f: P.T(f, 0, input=temporal(f)) for f in sources}  # T_{f←0}, for warping
             losses, automask = self._view_synthesis_losses(frames.float(), K, disps, poses)
-            # The paper's constraints (SPEC §5), each in the reading order of its equation, as means
-            # over the samples `sub` (the whole batch unless loss.constraint_fraction < 1).
+            # The paper's constraints (SPEC §5), each in the reading order of its equation.
             if "fb" in constraints:  # d(T_{f←0}, inverse(T_{0←f} from the reversed pair)) for each source
                 losses["fb"] = forward_backward_loss(
-                    torch.cat([poses[f][sub] for f in sources]),
+                    torch.cat([poses[f] for f in sources]),
                     torch.cat([P.T(0, f, input=temporal(f)[::-1]) for f in sources]),
-                    lo.translation_norm,
                 )
             if "id" in constraints:  # ‖e‖₁ + ‖t‖₁ of pose(I_0, I_0)
                 losses["id"] = identity_loss(*P.vector(0, 0))
@@ -180,9 +157,8 @@ class PoseConsModel(nn.Module):
                 prev, nxt = self.cycle_ids()
                 losses["cyc"] = cycle_loss(
                     P.T(nxt, prev, input=(prev, nxt)),
-                    P.T(nxt, 0, input=temporal(nxt))[sub],
-                    P.T(0, prev, input=temporal(prev))[sub],
-                    lo.translation_norm,
+                    P.T(nxt, 0, input=temporal(nxt)),
+                    P.T(0, prev, input=temporal(prev)),
                 )
             terms = list(constraints)
             if lo.depth_consistency_weight > 0:

@@ -67,29 +67,18 @@ class GroupedBatchNorm2d(nn.BatchNorm2d):
     The pose net sees every pair of a step in one batch (temporal pairs first, then the
     constraints' reversed, identity and skip pairs): grouping keeps the constraint pairs from
     changing the warping poses, and tracking only the temporal pairs keeps them out of the
-    statistics used at evaluation. Groups may differ in size (the constraints of
-    ``loss.constraint_fraction`` < 1 see a subset of the batch). In eval mode it is a plain BatchNorm2d.
+    statistics used at evaluation. Groups may differ in size. In eval mode it is a plain BatchNorm2d.
     """
 
     sizes: tuple[int, ...] = ()  # () or one group: the whole batch
     tracked: int = 1
-    reference: str = "own"
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if not self.training or len(self.sizes) <= 1:
             return super().forward(x)
         out = []
-        chunks = x.split(self.sizes)
-        if self.reference == "temporal":  # constraint groups see the tracked groups' batch statistics
-            ref = torch.cat(chunks[: self.tracked]).float()
-            var, mean = torch.var_mean(ref, (0, 2, 3), correction=0)
-            scale = self.weight * torch.rsqrt(var + self.eps)
-            shift = self.bias - mean * scale
-        for i, chunk in enumerate(chunks):
+        for i, chunk in enumerate(x.split(self.sizes)):
             track = i < self.tracked
-            if not track and self.reference == "temporal":
-                out.append((chunk * scale[:, None, None] + shift[:, None, None]).to(chunk.dtype))
-                continue
             out.append(
                 F.batch_norm(
                     chunk,
@@ -239,12 +228,10 @@ MIRROR_SIGN = torch.tensor([[1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]])
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(
-        self, num_layers: int = 18, imagenet: dict | None = None, constraint_norm: str = "own", mirror: bool = False
-    ):
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, norm_layer=GroupedBatchNorm2d)
-        self.constraint_norm, self.mirror = constraint_norm, mirror
+        self.mirror = mirror
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
     def forward(
@@ -271,7 +258,6 @@ class PoseNet(nn.Module):
         for bn in self.encoder.modules():
             if isinstance(bn, GroupedBatchNorm2d):
                 bn.sizes, bn.tracked = tuple(groups), len(groups) if tracked is None else tracked
-                bn.reference = self.constraint_norm
         axisangle, translation = self.decoder(self.encoder(pairs)[-1])
         if not self.mirror:
             return axisangle, translation

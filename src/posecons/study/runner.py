@@ -229,7 +229,7 @@ def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
 
 def raw_weights_result(checkpoint: Path, data: StudyData) -> dict[str, Any]:
     """With ``train.ema_decay``, the raw weights of the same step evaluated as the EMA is: the EMA's
-    effect paired on one trajectory (docs/lab/investigation.md §7). Empty for a checkpoint without an EMA."""
+    effect paired on one trajectory (experiments/investigation.md §7). Empty for a checkpoint without an EMA."""
     state = load_checkpoint(checkpoint)
     if "raw_model" not in state:
         return {}

@@ -54,7 +54,7 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from ..checkpoint import load_checkpoint, save_checkpoint
-from ..config import Config
+from ..config import Config, without_retired
 from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
@@ -350,7 +350,7 @@ class Trainer:
                 "needs the checkpoints/last.pt that a run writes"
             )
         saved, requested = (
-            _without_imagenet(state["config"])["model"],
+            _without_imagenet(without_retired(state["config"]))["model"],  # a run from before a removal resumes
             _without_imagenet(self.config.to_dict())["model"],
         )
         if saved != requested:
@@ -579,7 +579,7 @@ class Trainer:
         epoch schedule, which sees (and saves) only its own rate. From scratch, Adam's first
         updates are lr-sized on every weight at once: without warm-up the pose net's translation
         grows fivefold in one step, far beyond the range where the photometric gradient tells
-        forward from backward (docs/lab/investigation.md §3)."""
+        forward from backward (experiments/investigation.md §3)."""
         factor = self._warmup_factor(self.step + 1)
         if factor == 1.0:
             yield
@@ -654,7 +654,7 @@ class Trainer:
 
 
 def collapse_signs(outputs: dict) -> dict[str, float]:
-    """The two signs of a run collapsing from scratch (docs/lab/investigation.md §3), from the model's outputs:
+    """The two signs of a run collapsing from scratch (experiments/investigation.md §3), from the model's outputs:
     the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the rest
     from the loss), and the share of full-scale disparities pinned at the far end (sigmoid < 0.01)."""
     return {

@@ -3,11 +3,11 @@ of the study recipes does not depend on train.max_steps (warm-up, then constant)
 after N steps are those of an N-step run. While a study trains, ``keep`` copies the weights from each
 run's ``last.pt`` (written every train.checkpoint_every steps) when it reaches one of the steps; then
 ``evaluate`` runs the study's own evaluation on every copy and writes one result JSON per run and step,
-which tools/paired.py and ``posecons study --report-only`` read (docs/lab/investigation.md §10).
+which experiments/tools/paired.py and ``posecons study --report-only`` read (experiments/investigation.md §10).
 
-    python tools/at_steps.py keep runs/study_bf16 runs/study_bf16_at/weights --steps 400 500 &
-    python tools/at_steps.py evaluate study/synth_bf16 runs/study_bf16 runs/study_bf16_at/weights runs/study_bf16_at
-    python tools/paired.py runs/study_bf16_at/step400/results/baseline runs/study_bf16_at/step400/results/cyc
+    python experiments/tools/at_steps.py keep runs/study_bf16 runs/study_bf16_at/weights --steps 400 500 &
+    python experiments/tools/at_steps.py evaluate experiments/specs/synth_bf16.yaml runs/study_bf16 runs/study_bf16_at/weights runs/study_bf16_at
+    python experiments/tools/paired.py runs/study_bf16_at/step400/results/baseline runs/study_bf16_at/step400/results/cyc
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@ each source, the disparity's mean and its far-saturated share, and the share of 
 warped source beats the unwarped one (the auto-mask). A run from scratch settles its direction of
 motion in these steps; for forward driving the translation's z of T_{−n←0} must be positive
 (camera −n is behind), and a run that points it backwards or pins the disparity at the far end
-collapses (docs/lab/investigation.md §3).
+collapses (experiments/investigation.md §3).
 
-    python tools/early_steps.py --config synth/study --data-path DATA --steps 60 --set train.seed=1
+    python experiments/tools/early_steps.py --config synth/study --data-path DATA --steps 60 --set train.seed=1
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 the intervals between logged steps (train.log_every apart), which leaves out the start-up and any
 pause (a study stopped with SIGSTOP while something else was timed). docs/performance.md, sizing.
 
-    python tools/step_times.py runs/study_bf16 [more study folders]
+    python experiments/tools/step_times.py runs/study_bf16 [more study folders]
 """
 
 from __future__ import annotations

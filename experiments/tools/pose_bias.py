@@ -7,9 +7,9 @@ disparity of the left and right image halves, and how far the depth of the mirro
 back, is from the frame's own (0 for a mirror-symmetric network). For the cycle constraint: the
 rotation and translation parts of d(T_{i+2s←i}, T_{i+2s←i+s}·T_{i+s←i}) (geometry.pose_distance's two
 terms) and the skip pair's translation against a step's, beside the ground truth's ratio
-(docs/lab/investigation.md §5).
+(experiments/investigation.md §5).
 
-    python tools/pose_bias.py --odometry DATA/odometry --sequence 05 RUN/checkpoints/last.pt [...]
+    python experiments/tools/pose_bias.py --odometry DATA/odometry --sequence 05 RUN/checkpoints/last.pt [...]
 """
 
 from __future__ import annotations

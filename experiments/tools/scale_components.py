@@ -1,10 +1,10 @@
 """What a study's σ/μ is made of: for each variant (mean ± std over its seeds), the mean σ/μ of the
 frame scales, how strongly the scale follows the scene's depth (log-log slope and correlation with
 the frame's median LiDAR depth), the σ/μ left once that dependence is divided out, and the
-frame-to-frame jitter (:func:`posecons.metrics.depth.scale_vs_scene_depth`; docs/lab/investigation.md §4);
+frame-to-frame jitter (:func:`posecons.metrics.depth.scale_vs_scene_depth`; experiments/investigation.md §4);
 then, seed by seed, each variant's difference from the first one named.
 
-    python tools/scale_components.py --results OUT/results --gt OUT/gt/test_depth.npz baseline cyc [...]
+    python experiments/tools/scale_components.py --results OUT/results --gt OUT/gt/test_depth.npz baseline cyc [...]
 """
 
 from __future__ import annotations

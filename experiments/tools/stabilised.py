@@ -1,10 +1,10 @@
 """A study's runs with the test-time stabiliser (``predict --stabilise``, SPEC §12) applied to their
 test depths: each finished run's last weights are evaluated as the study evaluates them, with every
 test drive's disparities divided by the stabiliser's factors, and written as a result JSON of the same
-variant and seed, so that tools/paired.py pairs stabilised against plain seed by seed on one network.
+variant and seed, so that experiments/tools/paired.py pairs stabilised against plain seed by seed on one network.
 
-    python tools/stabilised.py study/synth_fast runs/study_fast runs/study_fast_stabilised
-    python tools/paired.py runs/study_fast/results/baseline runs/study_fast_stabilised/baseline
+    python experiments/tools/stabilised.py study/synth_fast runs/study_fast runs/study_fast_stabilised
+    python experiments/tools/paired.py runs/study_fast/results/baseline runs/study_fast_stabilised/baseline
 """
 
 from __future__ import annotations

@@ -1,12 +1,12 @@
 """Two sets of study runs compared seed by seed: the same variant in two study folders (another
-recipe or precision, docs/lab/investigation.md §9), two variants of one folder, or a run's raw weights against
+recipe or precision, experiments/investigation.md §9), two variants of one folder, or a run's raw weights against
 its EMA (``VARIANT@raw``: an EMA run holds the result of its raw weights of the same step, so the two
 are paired on one trajectory, §7). Printed: mean ± std over seeds of the study's paired metrics for
 each side (the std is how noisy a single run is), then B − A with the study report's paired statistics
 (t-interval, exact sign-flip p, MDE; Holm over the secondary metrics).
 
-    python tools/paired.py runs/study_w/results/baseline_ema@raw runs/study_w/results/baseline_ema
-    python tools/paired.py runs/study_w/results/cyc runs/study_bf16/results/cyc@raw
+    python experiments/tools/paired.py runs/study_w/results/baseline_ema@raw runs/study_w/results/baseline_ema
+    python experiments/tools/paired.py runs/study_w/results/cyc runs/study_bf16/results/cyc@raw
 """
 
 from __future__ import annotations
