@@ -210,9 +210,9 @@ def run_kind(result: dict) -> str:
 
 def pair_alike(variants: Sequence[str], results: Sequence[dict]) -> tuple[list[dict], list[str]]:
     """(the runs of ``variants`` that the reference's run of the same seed computed alike, the others
-    named as 'variant seed k (its kind; the reference's)'); see :func:`run_kind`."""
+    as 'variant seeds k, l (their kind; the reference's)' lines); see :func:`run_kind`."""
     kinds = {(r["variant"], int(r["seed"])): run_kind(r) for r in results if r["variant"] in variants}
-    alike, left_out = [], []
+    alike, apart = [], {}
     for r in results:
         variant, seed = r["variant"], int(r["seed"])
         if variant not in variants:
@@ -221,7 +221,15 @@ def pair_alike(variants: Sequence[str], results: Sequence[dict]) -> tuple[list[d
         if reference in (None, kinds[variant, seed]):
             alike.append(r)
         else:
-            left_out.append(f"{variant} seed {seed} ({kinds[variant, seed]}; {variants[0]}: {reference})")
+            apart.setdefault((kinds[variant, seed], reference), {}).setdefault(variant, []).append(seed)
+    left_out = []
+    for (kind, reference), seeds in apart.items():
+        runs = "; ".join(
+            f"{v} seed{'s' * (len(seeds[v]) > 1)} {', '.join(map(str, sorted(seeds[v])))}"
+            for v in variants
+            if v in seeds
+        )
+        left_out.append(f"{runs} ({kind}; {variants[0]}: {reference})")
     return alike, left_out
 
 
