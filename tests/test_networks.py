@@ -94,20 +94,19 @@ def test_constraint_groups_can_use_the_temporal_groups_statistics():
     bn = networks.GroupedBatchNorm2d(4).train()
     nn.init.uniform_(bn.weight, 0.5, 2)
     nn.init.uniform_(bn.bias, -1, 1)
-    bn.sizes, bn.tracked, bn.reference = (2, 2, 2), 2, "temporal"
     x = torch.randn(6, 4, 5, 7) * 3 + 1
-    out = bn(x)
+    out = bn(x, networks.BatchGroups((2, 2, 2), 2, "temporal"))
     # The temporal groups are normalised on their own, as in "own" mode ...
     own = networks.GroupedBatchNorm2d(4).train()
     own.load_state_dict(bn.state_dict())
-    own.sizes, own.tracked = (2, 2, 2), 2
-    assert torch.allclose(out[:4], own(x)[:4], atol=1e-6)
+    groups = networks.BatchGroups((2, 2, 2), 2)
+    assert torch.allclose(out[:4], own(x, groups)[:4], atol=1e-6)
     # ... and the constraint group with the mean and biased variance of both temporal groups together.
     pooled = x[:4].transpose(0, 1).flatten(1)
     mean, var = pooled.mean(1), pooled.var(1, unbiased=False)
     expected = F.batch_norm(x[4:], mean, var, bn.weight, bn.bias, False, 0.0, bn.eps)
     assert torch.allclose(out[4:], expected, atol=1e-5)
-    assert not torch.allclose(out[4:], own(x)[4:], atol=1e-2)  # its own statistics would differ
+    assert not torch.allclose(out[4:], own(x, groups)[4:], atol=1e-2)  # its own statistics would differ
 
 
 @pytest.mark.parametrize("train", [False, True])
@@ -164,9 +163,8 @@ def test_groups_of_different_sizes_equal_separate_calls():
     torch.manual_seed(4)
     # One BatchNorm layer: exactly what a separate call per group computes, only tracked groups counted.
     bn, ref = networks.GroupedBatchNorm2d(4), torch.nn.BatchNorm2d(4)
-    bn.sizes, bn.tracked = (3, 1, 2), 1
     x = torch.randn(6, 4, 5, 7) * 3 + 1
-    out = bn(x)
+    out = bn(x, networks.BatchGroups((3, 1, 2), 1))
     assert torch.equal(out[:3], ref(x[:3]))
     for lo, hi in ((3, 4), (4, 6)):  # untracked groups: their own batch statistics, no running update
         assert torch.equal(out[lo:hi], torch.nn.functional.batch_norm(x[lo:hi], None, None, bn.weight, bn.bias, True))
