@@ -189,7 +189,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         post_process=bool(args.checkpoint and args.post_process),
         eigen_to_benchmark=args.eigen_to_benchmark,
     )
-    print(compare.markdown_table([result], [Path(pred_name).stem], bold=False), end="")
+    print(compare.results_table([result], [Path(pred_name).stem], bold=False), end="")
     print(
         f"{result['n_frames']} frames, scaling {result['scaling']}"
         + (f" × {result['scale_factor']:g}" if result["scale_factor"] != 1 else "")
@@ -253,7 +253,7 @@ def compare_command(args: argparse.Namespace) -> int:
 
     results = [compare.load_result(path) for path in args.results]
     names = args.names or [compare.default_name(path) for path in args.results]
-    table = compare.markdown_table(results, names)
+    table = compare.results_table(results, names)
     print(table, end="")
     if args.out:
         write_text(args.out, table)
