@@ -105,6 +105,9 @@ RULES: dict[str, Check] = {
     "train.max_bad_steps": _at_least(1),
     "train.ema_decay": _rule(lambda v: 0 <= v < 1, "must be in [0, 1)"),
 }
+# Older spellings that are still read, as (that value, the one spelling a config holds): YAML 1.1
+# reads a bare `off` as false, and 0 meant "epoch" in the configs of earlier runs.
+RESPELLED = {"train.val_every": ((False, "off"), (0, "epoch"))}
 
 
 @dataclass
@@ -186,8 +189,8 @@ class TrainConfig:
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50
     image_every: int = 500  # steps between TensorBoard images; 0: none
-    # Steps between validations, "epoch" (after each epoch) or "off" (never; no best.pt); 0 also means "epoch".
-    val_every: Union[int, str, bool] = "epoch"
+    # Steps between validations, "epoch" (after each epoch) or "off" (never; no best.pt).
+    val_every: Union[int, str] = "epoch"
     val_samples: int = 500  # validation uses at most this many val-split samples, spread evenly
     # best.pt: lowest "val_photometric" (self-supervised, the default) or "abs_rel" (needs LiDAR
     # ground truth in the val split: supervised model selection, named as such in every report)
@@ -212,11 +215,6 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
 
     def validate(self) -> Config:
-        t = self.train
-        if t.val_every is False:  # YAML 1.1 reads a bare `off` as false
-            t.val_every = "off"
-        elif t.val_every == 0:  # the old spelling of "epoch", in the configs of earlier runs
-            t.val_every = "epoch"
         self._check_rules()
         m, lo = self.model, self.loss
         if m.min_depth >= m.max_depth:
@@ -278,6 +276,11 @@ def _check_type(value: Any, hint: Any, key: str) -> Any:
     return value
 
 
+def _respelled(key: str, value: Any) -> Any:
+    """``value`` in the one spelling a config holds (:data:`RESPELLED`)."""
+    return next((new for old, new in RESPELLED.get(key, ()) if type(value) is type(old) and value == old), value)
+
+
 def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
     hints = typing.get_type_hints(type(obj))
     names = {f.name for f in dataclasses.fields(obj)}
@@ -291,7 +294,7 @@ def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
                 raise PoseconsError(f"config key {full}: expected a mapping, got {value!r}")
             _merge(current, value, full + ".")
         else:
-            setattr(obj, key, _check_type(value, hints[key], full))
+            setattr(obj, key, _check_type(_respelled(full, value), hints[key], full))
 
 
 def _read_preset(path: Path, seen: tuple[Path, ...] = ()) -> list[dict[str, Any]]:
