@@ -20,7 +20,7 @@ from ..data.splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
 from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
-from ..inference.io import frames_from_paths
+from ..inference.media import frames_from_paths
 from ..inference.stabilise import DEFAULT_TIME_CONSTANT, stabilise
 from ..metrics.depth import CROP_FOR_GT_KIND, evaluate_depth
 from ..metrics.pose import align_trajectory, evaluate_pose, global_from_relative

@@ -17,9 +17,9 @@ import numpy as np
 import torch
 
 from ..checkpoint import load_model
-from ..data.io import resize_rgb
+from ..data.images import resize_rgb
 from ..errors import PoseconsError
-from .io import Frame
+from .media import Frame
 
 EXPORT_INFO = "export.json"
 DEPTH_ONNX = "depth.onnx"
@@ -140,7 +140,7 @@ def predict_batches(
     scaled disparities (B, 1, h, w), or None with ``depth=False``).
 
     Frames stream through, so a whole sequence never sits in memory. Images are resized to the
-    network size like the training data (:func:`~posecons.data.io.resize_rgb`); ``post_process``
+    network size like the training data (:func:`~posecons.data.images.resize_rgb`); ``post_process``
     also runs the mirrored images and blends (:func:`post_process_disparity`).
     """
     batch: list[Frame] = []
