@@ -179,8 +179,15 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         if args.eigen_to_benchmark:
             disps = evaluate.eigen_to_benchmark(disps, split, pred_name)
 
-    result = evaluate.depth_result(
-        disps, gts, split, args.scaling, gt_kind, pred_name, str(gt_path), args.scale_factor or 1.0
+    result = evaluate.evaluate_depth(
+        disps,
+        gts,
+        split,
+        gt_kind,
+        pred_name,
+        scaling=args.scaling,
+        gt_name=str(gt_path),
+        scale_factor=args.scale_factor or 1.0,
     )
     if args.checkpoint is not None:
         result.update(checkpoint=describe_checkpoint(args.checkpoint))
@@ -231,7 +238,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
         checkpoint = None
 
-    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
+    result = evaluate.evaluate_pose(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")

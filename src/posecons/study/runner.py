@@ -250,7 +250,8 @@ def depth_floor(spec: StudySpec, data: StudyData) -> dict[str, Any]:
     gts, _ = load_gt(data.gt)
     name = f"the renderer's depth at {m.width}×{m.height}"
     depth = {
-        s: evaluate.depth_result(disps, gts, data.split, s, pred_name=name, gt_name=str(data.gt)) for s in SCALINGS
+        s: evaluate.evaluate_depth(disps, gts, data.split, scaling=s, pred_name=name, gt_name=str(data.gt))
+        for s in SCALINGS
     }
     return {"variant": FLOOR, "seed": 0, "depth": depth}
 
