@@ -143,8 +143,15 @@ def segments_note(result: dict) -> str:
     )
 
 
+def _loaded(weights: str | Path | Predictor) -> tuple[Predictor, str]:
+    """(predictor, the name its results carry) of networks already loaded, or of a path loaded here."""
+    if isinstance(weights, Predictor):
+        return weights, weights.name
+    return load_predictor(weights, "auto"), str(weights)
+
+
 def checkpoint_depth(
-    checkpoint: Path,
+    checkpoint: str | Path | Predictor,
     data_path: Path,
     split: Sequence[SplitLine],
     gt_path: Path,
@@ -152,16 +159,17 @@ def checkpoint_depth(
     stabilised: bool = False,
 ) -> dict[str, dict]:
     """{scaling: :func:`evaluate_depth`} of a checkpoint's disparities (predicted once) on the ``split``
-    lines against the LiDAR ground truth exported to ``gt_path``; with ``stabilised`` also
+    lines against the LiDAR ground truth exported to ``gt_path`` (``checkpoint``: a path, or networks
+    already loaded); with ``stabilised`` also
     {"<scaling>_stabilised": ...} of the same disparities after :func:`stabilised_disparities`, whose
     ``stabiliser_factors`` it records."""
     gts, _ = load_gt(gt_path)
-    predictor = load_predictor(checkpoint, "auto")
+    predictor, name = _loaded(checkpoint)
     runs = {"": model_disparities(predictor, data_path, split)}
     if stabilised:
         runs["_stabilised"], factors = stabilised_disparities(predictor, data_path, split, runs[""])
     results = {
-        s + suffix: evaluate_depth(disps, gts, split, scaling=s, pred_name=str(checkpoint), gt_name=str(gt_path))
+        s + suffix: evaluate_depth(disps, gts, split, scaling=s, pred_name=name, gt_name=str(gt_path))
         for suffix, disps in runs.items()
         for s in scalings
     }
@@ -170,17 +178,20 @@ def checkpoint_depth(
     return results
 
 
-def checkpoint_pose(checkpoint: Path, odometry: Path, sequence: str, out_dir: Path | None = None) -> dict:
+def checkpoint_pose(
+    checkpoint: str | Path | Predictor, odometry: Path, sequence: str, out_dir: Path | None = None
+) -> dict:
     """:func:`evaluate_pose` (snippet ATE, full ATE, t_err / r_err, constant-velocity baseline) of a checkpoint's
     chained steps on odometry ``sequence`` (ground truth ``odometry/poses/<NN>.txt``); with ``out_dir``
     also its trajectory files and top view (:func:`write_trajectories`)."""
     gt_file = Path(odometry) / "poses" / f"{int(sequence):02d}.txt"
     gt = read_kitti_poses(gt_file)
-    steps = model_steps(load_predictor(checkpoint, "auto"), list_sequence_frames(odometry, sequence))
+    predictor, name = _loaded(checkpoint)
+    steps = model_steps(predictor, list_sequence_frames(odometry, sequence))
     estimate = global_from_relative(steps)
     if out_dir is not None:
         write_trajectories(out_dir, estimate, gt)
-    return evaluate_pose(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
+    return evaluate_pose(estimate, gt, pred_name=name, gt_name=str(gt_file))
 
 
 def write_depth_plots(result: dict, lines: Sequence[SplitLine], out_dir: Path) -> None:
