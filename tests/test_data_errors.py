@@ -9,8 +9,7 @@ import pytest
 
 from posecons.cli import main
 from posecons.data.calib import raw_intrinsics, read_calib_file
-from posecons.data.gt import export_gt
-from posecons.data.io import load_velodyne
+from posecons.data.gt import export_gt, load_velodyne
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.prepare import prepare
 from posecons.data.splits import read_split

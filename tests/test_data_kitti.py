@@ -10,8 +10,8 @@ import torch
 from PIL import Image
 
 from posecons.data.calib import raw_intrinsics, read_calib_file, velo_to_image
-from posecons.data.gt import improved_gt_path, lidar_gt, read_improved_gt, velo_to_depth_map
-from posecons.data.io import load_resized, load_rgb, load_velodyne, resize_uint8
+from posecons.data.gt import improved_gt_path, lidar_gt, load_velodyne, read_improved_gt, velo_to_depth_map
+from posecons.data.images import load_resized, load_rgb, resize_uint8
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts

@@ -11,8 +11,7 @@ import torch
 
 from posecons.cli import main
 from posecons.data.calib import raw_intrinsics, velo_to_image
-from posecons.data.gt import load_gt
-from posecons.data.io import load_velodyne
+from posecons.data.gt import load_gt, load_velodyne
 from posecons.data.kitti_odometry import KittiOdometryDataset, list_sequence_frames
 from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts
@@ -215,7 +214,7 @@ def test_training_frames_are_decoded_and_resized_as_evaluation_does(tmp_path: Pa
     from PIL import Image
 
     from posecons.inference.backend import Predictor, predict_batches
-    from posecons.inference.io import frames_from_paths
+    from posecons.inference.media import frames_from_paths
 
     rng = np.random.default_rng(0)
     drive = tmp_path / "2011_09_26" / "2011_09_26_drive_0001_sync" / "image_02" / "data"

@@ -18,7 +18,7 @@ from posecons.checkpoint import load_model, save_checkpoint
 from posecons.cli import main
 from posecons.config import PRESETS, load_config
 from posecons.data.calib import normalised_to_pixel, read_calib_intrinsics
-from posecons.data.io import resize_rgb
+from posecons.data.images import resize_rgb
 from posecons.data.synth import drive_folder, generate_synth
 from posecons.data.trajectory_io import read_kitti_poses, read_tum
 from posecons.fileio import MANIFEST
@@ -26,7 +26,7 @@ from posecons.geometry import backproject, pose_vec_to_mat
 from posecons.inference import PredictOptions, export_model, load_predictor, predict
 from posecons.inference.backend import Predictor
 from posecons.inference.camera import resolve_intrinsics
-from posecons.inference.io import FrameSource
+from posecons.inference.media import FrameSource
 from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
 from posecons.inference.predict import gt_scale
 from posecons.inference.scale import camera_height

@@ -7,7 +7,7 @@ from PIL import Image
 
 from posecons.evaluation.evaluate import model_steps
 from posecons.inference.backend import Predictor, post_process_disparity, predict_batches
-from posecons.inference.io import Frame
+from posecons.inference.media import Frame
 
 
 def test_post_process_blends_towards_the_mirrored_prediction_at_the_left_border():

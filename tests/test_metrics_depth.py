@@ -8,8 +8,8 @@ from posecons.metrics.depth import (
     MAX_DEPTH,
     MIN_DEPTH,
     compute_depth_metrics,
+    depth_metrics,
     drift_stats,
-    evaluate_depth,
     frame_scale,
     garg_crop_bounds,
     resize_disparity,
@@ -78,18 +78,18 @@ def test_median_scaling_and_clamp():
     # Three pixels, no crop: median(gt)/median(pred) = 4/3, while median(gt/pred) = 2 and
     # mean(gt)/mean(pred) = 9/4 (the ratios are 2, 1, 4).
     gt, pred = np.array([[2.0, 4.0, 12.0]], np.float32), np.array([[1.0, 4.0, 3.0]], np.float32)
-    r = evaluate_depth((1 / pred)[None], [gt], ["a"], scaling="frame", crop="none")
+    r = depth_metrics((1 / pred)[None], [gt], ["a"], scaling="frame", crop="none")
     assert r["scales"] == pytest.approx([4 / 3])
     # Scaled prediction 4/3, 16/3, 4 against 2, 4, 12: relative errors 1/3, 1/3, 2/3.
     assert r["abs_rel"] == pytest.approx(4 / 9)
     # No scaling: relative errors 1/2, 0, 3/4; a prediction of 500 m is clamped to 80 m.
-    unscaled = evaluate_depth((1 / pred)[None], [gt], ["a"], scaling="none", crop="none")
+    unscaled = depth_metrics((1 / pred)[None], [gt], ["a"], scaling="none", crop="none")
     assert unscaled["abs_rel"] == pytest.approx(5 / 12)
     far, gt = _frame(10.0, 500.0)
-    assert evaluate_depth(far[None], [gt], ["a"], scaling="none")["abs_rel"] == pytest.approx(7.0)
+    assert depth_metrics(far[None], [gt], ["a"], scaling="none")["abs_rel"] == pytest.approx(7.0)
     # The clamp comes after scaling: a 0.5 m prediction scaled ×200 (GT 100 m, improved GT) is cut to 80 m.
     gt100 = np.full((8, 8), 100.0, np.float32)
-    r = evaluate_depth(np.full((1, 4, 4), 2.0, np.float32), [gt100], ["a"], crop="none")
+    r = depth_metrics(np.full((1, 4, 4), 2.0, np.float32), [gt100], ["a"], crop="none")
     assert r["scales"] == pytest.approx([200.0]) and r["abs_rel"] == pytest.approx(0.2)
 
 
@@ -100,7 +100,7 @@ def test_a_depth_range_clamps_the_prediction_to_it():
     def abs_rel(gt: float, pred: float, depth_range=None) -> float:
         disp = np.full((1, 2, 2), 1 / pred, np.float32)
         gts = [np.full((2, 2), gt, np.float32)]
-        return evaluate_depth(disp, gts, ["a"], scaling="none", crop="none", depth_range=depth_range)["abs_rel"]
+        return depth_metrics(disp, gts, ["a"], scaling="none", crop="none", depth_range=depth_range)["abs_rel"]
 
     assert abs_rel(9.0, 20.0, (0.1, 10.0)) == pytest.approx(1 / 9)
     assert abs_rel(9.0, 20.0) == pytest.approx(11 / 9)
@@ -114,13 +114,13 @@ def test_sequence_scaling_uses_one_factor_per_sequence():
     frames = [_frame(10.0, 10.0 / s) for s in (2.0, 4.0, 6.0, 3.0)]
     disps = np.stack([f[0] for f in frames])
     gts = [f[1] for f in frames]
-    r = evaluate_depth(disps, gts, ["a", "a", "a", "b"], scaling="sequence")
+    r = depth_metrics(disps, gts, ["a", "a", "a", "b"], scaling="sequence")
     assert r["scales"] == pytest.approx([2.0, 4.0, 6.0, 3.0])
     # Scaled predictions in a: 20, 10, 6.67 m against 10 m → abs rel 1, 0, 1/3; b is exact.
     assert r["per_sequence"]["a"]["abs_rel"] == pytest.approx((1 + 0 + 1 / 3) / 3, rel=1e-5)
     assert r["per_sequence"]["b"]["abs_rel"] == pytest.approx(0.0, abs=1e-6)
     assert r["abs_rel"] == pytest.approx((1 + 0 + 1 / 3 + 0) / 4, rel=1e-5)
-    assert evaluate_depth(disps, gts, ["a", "a", "a", "b"], scaling="frame")["abs_rel"] == pytest.approx(0, abs=1e-6)
+    assert depth_metrics(disps, gts, ["a", "a", "a", "b"], scaling="frame")["abs_rel"] == pytest.approx(0, abs=1e-6)
 
 
 def test_scale_consistency_constant_and_linear_drift():
@@ -140,14 +140,14 @@ def test_scale_consistency_constant_and_linear_drift():
 def test_drifting_prediction_through_the_protocol():
     n, a = 6, 0.1
     frames = [_frame(10.0, 10.0 / (1 + a * i), shape=(40, 40)) for i in range(n)]
-    r = evaluate_depth(np.stack([f[0] for f in frames]), [f[1] for f in frames], ["s"] * n, crop="none")
+    r = depth_metrics(np.stack([f[0] for f in frames]), [f[1] for f in frames], ["s"] * n, crop="none")
     assert r["scale_cv"] == pytest.approx(a * np.sqrt((n**2 - 1) / 12) / (1 + a * (n - 1) / 2), rel=1e-5)
 
 
 def test_frames_without_valid_gt_are_skipped_and_reported():
     disp, gt = _frame(10.0, 5.0)
     empty = np.zeros_like(gt)
-    r = evaluate_depth(np.stack([disp, disp]), [gt, empty], ["a", "a"])
+    r = depth_metrics(np.stack([disp, disp]), [gt, empty], ["a", "a"])
     assert (r["n_frames"], r["n_skipped"], r["skipped"]) == (1, 1, [1])
     assert np.isnan(r["scales"][1]) and r["scales"][0] == pytest.approx(2.0)
 
@@ -157,13 +157,13 @@ def test_bad_disparities_name_the_input(value):
     disp, gt = _frame(10.0, 5.0)
     disp[3, 4] = value
     with pytest.raises(PoseconsError, match="pred.npy.*frame 0"):
-        evaluate_depth(disp[None], [gt], ["a"], pred_name="pred.npy")
+        depth_metrics(disp[None], [gt], ["a"], pred_name="pred.npy")
 
 
 def test_count_mismatch_names_both_inputs():
     disp, gt = _frame(10.0, 5.0)
     with pytest.raises(PoseconsError, match="pred.npy has 2 frames but gt.npz has 1"):
-        evaluate_depth(np.stack([disp, disp]), [gt], ["a"], pred_name="pred.npy", gt_name="gt.npz")
+        depth_metrics(np.stack([disp, disp]), [gt], ["a"], pred_name="pred.npy", gt_name="gt.npz")
 
 
 def test_frame_scale_takes_the_medians_over_the_mask_it_is_given():

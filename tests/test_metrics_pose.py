@@ -9,10 +9,10 @@ from posecons.errors import PoseconsError
 from posecons.metrics.pose import (
     apply_sim3,
     constant_velocity_steps,
-    evaluate_pose,
     global_from_relative,
     invert_rigid,
     odometry_errors,
+    pose_metrics,
     quaternion_to_rotation,
     relative_from_global,
     rotation_to_quaternion,
@@ -82,10 +82,10 @@ def test_snippet_ate_on_real_odometry_09(kitti_dir):
     noisy = gt.copy()
     noisy[:, :3, 3] += 0.02 * rng.standard_normal((len(gt), 3))
     noisy[:, :3, 3] *= 0.3  # monocular: unknown global scale
-    r = evaluate_pose(global_from_relative(noisy), gt_global)
+    r = pose_metrics(global_from_relative(noisy), gt_global)
     assert r["n_snippets"] == 1590
     assert 0.005 < r["ate_mean"] < 0.05  # noise of 2 cm per step gives ~1–2 cm snippet errors
-    exact = evaluate_pose(gt_global, gt_global)
+    exact = pose_metrics(gt_global, gt_global)
     assert exact["ate_mean"] == pytest.approx(0.0, abs=1e-9) and exact["ate_full_rmse"] == pytest.approx(0.0, abs=1e-9)
     assert r["sim3_scale"] == pytest.approx(1 / 0.3, rel=0.05)
     assert r["segment_lengths"] == [100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0] and r["devkit_lengths"]
@@ -115,7 +115,7 @@ def test_umeyama_recovers_a_similarity():
 
 def test_full_metrics_on_a_short_sequence():
     G = _drive(100)  # ~99 m: shorter than KITTI's 100 m segments
-    r = evaluate_pose(G, G)
+    r = pose_metrics(G, G)
     assert r["ate_full_rmse"] == pytest.approx(0.0, abs=1e-9)
     # arccos near 1 turns rounding into ~1e-8 rad: r_err is zero to 1e-6 °/100 m.
     assert r["t_err"] == pytest.approx(0.0, abs=1e-9) and r["r_err"] == pytest.approx(0.0, abs=1e-6)
@@ -230,7 +230,7 @@ def test_constant_velocity_steps():
 def test_count_mismatch():
     G = _drive(10)
     with pytest.raises(PoseconsError, match="9 predicted poses but 10 ground-truth poses"):
-        evaluate_pose(G[:-1], G)
+        pose_metrics(G[:-1], G)
     assert np.allclose(invert_rigid(G) @ G, np.eye(4))
 
 

@@ -141,9 +141,8 @@ def test_groups_of_different_sizes_equal_separate_calls():
     torch.manual_seed(4)
     # One BatchNorm layer: exactly what a separate call per group computes, only tracked groups counted.
     bn, ref = networks.GroupedBatchNorm2d(4), torch.nn.BatchNorm2d(4)
-    bn.sizes, bn.tracked = (3, 1, 2), 1
     x = torch.randn(6, 4, 5, 7) * 3 + 1
-    out = bn(x)
+    out = bn(x, networks.BatchGroups((3, 1, 2), 1))
     assert torch.equal(out[:3], ref(x[:3]))
     for lo, hi in ((3, 4), (4, 6)):  # untracked groups: their own batch statistics, no running update
         assert torch.equal(out[lo:hi], torch.nn.functional.batch_norm(x[lo:hi], None, None, bn.weight, bn.bias, True))

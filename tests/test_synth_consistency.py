@@ -15,7 +15,7 @@ from posecons.data.synth import drive_folder, make_drive
 from posecons.data.synth.oracle import oracle_disparities
 from posecons.data.synth.render import camera_depth_at
 from posecons.data.synth.rig import Rig
-from posecons.evaluation.evaluate import depth_result
+from posecons.evaluation.evaluate import evaluate_depth
 from posecons.geometry import scale_intrinsics, warp
 from posecons.losses import photometric_error
 
@@ -64,14 +64,14 @@ def test_the_renderers_own_depth_scores_near_the_floor_and_frame_scales_show_in_
     export_gt(data, lines, gt_file)
     gts, _ = load_gt(gt_file)
     disps = oracle_disparities(data, lines, H, W)
-    perfect = depth_result(disps, gts, lines)
+    perfect = evaluate_depth(disps, gts, lines)
     # Tiny 192×64 frames: resizing and sparse LiDAR leave about 0.1 abs rel (an untrained net: about 0.4).
     assert perfect["abs_rel"] < 0.15 and perfect["a1"] > 0.9 and perfect["scale_cv"] < 0.04
     # The other camera's depth, or another drive's, is not the floor: the oracle must follow each line.
     wrong = oracle_disparities(data, [SplitLine(s.folder, (s.frame + 3) % FRAMES, "r") for s in lines], H, W)
-    assert depth_result(wrong, gts, lines)["abs_rel"] > 2 * perfect["abs_rel"]
+    assert evaluate_depth(wrong, gts, lines)["abs_rel"] > 2 * perfect["abs_rel"]
     # Depth predicted s_i times too far needs the scale 1/s_i: its spread reappears as σ/μ.
     s = np.random.default_rng(0).uniform(0.5, 2.0, len(lines))
-    scaled = depth_result(disps / s[:, None, None].astype(np.float32), gts, lines)
+    scaled = evaluate_depth(disps / s[:, None, None].astype(np.float32), gts, lines)
     assert scaled["abs_rel"] == pytest.approx(perfect["abs_rel"], rel=1e-3)
     assert scaled["scale_cv"] == pytest.approx(np.std(1 / s) / np.mean(1 / s), rel=0.1)

@@ -24,7 +24,7 @@ from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.trajectory_io import read_kitti_poses
 from posecons.geometry import pose_distance_terms, pose_vec_to_mat
 from posecons.inference.backend import load_predictor, predict_batches
-from posecons.inference.io import frames_from_paths
+from posecons.inference.media import frames_from_paths
 
 
 def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> dict[str, float]:

@@ -66,11 +66,16 @@ def read_weights(path: str | Path, map_location: str | torch.device = "cpu") -> 
     return _config(state["config"], path), state["model"], state
 
 
-def load_model(path: str | Path, map_location: str | torch.device = "cpu"):
-    """Checkpoint (``.pt``) or exported weights (``.safetensors``) → (PoseConsModel in eval mode, Config)."""
+def load_model(path: str | Path, map_location: str | torch.device = "cpu", entry: str = "model"):
+    """Checkpoint (``.pt``) or exported weights (``.safetensors``) → (PoseConsModel in eval mode, Config);
+    ``entry``: the checkpoint's weights to load, e.g. ``raw_model`` (the raw weights beside an EMA)."""
     from .model import PoseConsModel
 
-    config, weights, _ = read_weights(path, map_location)
+    config, weights, state = read_weights(path, map_location)
+    if entry != "model":
+        if entry not in state:
+            raise PoseconsError(f"{path}: no {entry!r} weights in this checkpoint")
+        weights = state[entry]
     config.model.pretrained = False  # the weights come from the file
     model = PoseConsModel(config)
     load_state_into(model, weights, path)

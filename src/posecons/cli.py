@@ -86,6 +86,16 @@ def add_overrides(parser: argparse.ArgumentParser, example: str) -> None:
     )
 
 
+def add_accelerator(parser: argparse.ArgumentParser) -> None:
+    """The ``--accelerator`` of the commands that train (train, study)."""
+    parser.add_argument(
+        "--accelerator",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="auto: CUDA when a GPU is visible, else the CPU",
+    )
+
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Every option's help ends with its default, unless it has none or the text already says it."""
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional, Union
@@ -22,50 +23,88 @@ from .errors import PoseconsError
 CONSTRAINTS = ("fb", "id", "cyc")
 PRESETS = Path(__file__).resolve().parent / "configs"  # bundled presets; the repository's configs/ links here
 STUDY_SPECS = PRESETS / "study"  # bundled `posecons study` specs (study/NAME), which are not training presets
+Check = Callable[[str, Any], Optional[str]]  # (key, value) → the error message, or None for a valid value
 
 
-def _at_least(low: float) -> tuple:
-    return (lambda v: v >= low, f"must be ≥ {low:g}")
+def _rule(test: Callable[[Any], Any], text: str) -> Check:
+    """A check whose error reads '<key> <text>, got <value>'."""
+    return lambda key, value: None if test(value) else f"{key} {text}, got {value!r}"
 
 
-_FRACTION = (lambda v: 0 <= v <= 1, "must be in [0, 1]")
-_POSITIVE = (lambda v: v > 0, "must be > 0")
-RANGES = {  # "section.key": (test, what a valid value is); every float must also be finite
+def _at_least(low: float) -> Check:
+    return _rule(lambda v: v >= low, f"must be ≥ {low:g}")
+
+
+def _one_of(*values: Any) -> Check:
+    spelled = [str(v).lower() if isinstance(v, bool) else repr(v) for v in values]  # as YAML writes them
+    return _rule(lambda v: v in values, f"must be {', '.join(spelled[:-1])} or {spelled[-1]}")
+
+
+def _known_constraints(key: str, value: list[str]) -> str | None:
+    bad = [c for c in value if c not in CONSTRAINTS]
+    return f"{key}: unknown {bad}; choose from {list(CONSTRAINTS)}" if bad else None
+
+
+def _val_every(key: str, value: Any) -> str | None:
+    if value in ("epoch", "off") or (type(value) is int and value >= 1):
+        return None
+    return f'{key} must be a number of steps ≥ 1, "epoch" (after each epoch) or "off"; got {value!r}'
+
+
+_FRACTION = _rule(lambda v: 0 <= v <= 1, "must be in [0, 1]")
+_POSITIVE = _rule(lambda v: v > 0, "must be > 0")
+# The one place that says which value of a key is valid: "section.key" → its check. Every float
+# must also be finite; checks that relate several keys are in Config.validate.
+RULES: dict[str, Check] = {
+    "model.num_layers": _one_of(10, 18, 34, 50),
+    "model.pretrained": _one_of(True, False, "auto"),
     "model.min_depth": _POSITIVE,
     "model.max_depth": _POSITIVE,
-    "model.scales": (
+    "model.scales": _rule(
         lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
         "must be distinct scales from 0–3, e.g. [0, 1, 2, 3]",
     ),
+    "model.frame_ids": _rule(
+        lambda v: v and v[0] == 0 and len(set(v)) == len(v), "must start with 0 and have no repeats"
+    ),
     "loss.ssim_weight": _FRACTION,
     "loss.identity_fraction": _FRACTION,
+    "loss.constraints": _known_constraints,
     "loss.smoothness_weight": _at_least(0),
     "loss.fb_weight": _at_least(0),
     "loss.id_weight": _at_least(0),
     "loss.cyc_weight": _at_least(0),
     "loss.constraint_start_step": _at_least(0),
     "loss.depth_consistency_weight": _at_least(0),
-    "data.split": (bool, "must name a split"),
-    "data.img_ext": (bool, "must be an extension such as .png"),
+    "data.dataset": _one_of("kitti_raw", "kitti_odom"),
+    "data.split": _rule(bool, "must name a split"),
+    "data.img_ext": _rule(bool, "must be an extension such as .png"),
     "data.flip_prob": _FRACTION,
     "data.jitter_prob": _FRACTION,
     "data.num_workers": _at_least(0),
     "train.batch_size": _at_least(1),
     "train.lr": _POSITIVE,
     "train.epochs": _at_least(1),
-    "train.lr_decay_epochs": (lambda v: all(e >= 1 for e in v), "must be epochs ≥ 1"),
+    "train.lr_decay_epochs": _rule(lambda v: all(e >= 1 for e in v), "must be epochs ≥ 1"),
     "train.lr_decay": _POSITIVE,
     "train.grad_accum": _at_least(1),
     "train.warmup_steps": _at_least(0),
     "train.seed": _at_least(0),
+    "train.precision": _one_of("32", "bf16", "16", "auto"),
     "train.max_steps": _at_least(0),
     "train.log_every": _at_least(1),
     "train.image_every": _at_least(0),
+    "train.val_every": _val_every,
     "train.val_samples": _at_least(1),
+    "train.best_metric": _one_of("val_photometric", "abs_rel"),
     "train.checkpoint_every": _at_least(0),
+    "train.keep_epochs": _rule(lambda v: v >= -1, "must be -1 (keep all), 0 (none) or a count"),
     "train.max_bad_steps": _at_least(1),
-    "train.ema_decay": (lambda v: 0 <= v < 1, "must be in [0, 1)"),
+    "train.ema_decay": _rule(lambda v: 0 <= v < 1, "must be in [0, 1)"),
 }
+# Older spellings that are still read, as (that value, the one spelling a config holds): YAML 1.1
+# reads a bare `off` as false, and 0 meant "epoch" in the configs of earlier runs.
+RESPELLED = {"train.val_every": ((False, "off"), (0, "epoch"))}
 
 # Options an investigation tried and did not keep (experiments/README.md). The configs stored before
 # their removal (checkpoints, runs' config.yaml) hold them at the one value the code still implements,
@@ -149,8 +188,8 @@ class TrainConfig:
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50
     image_every: int = 500  # steps between TensorBoard images; 0: none
-    # Steps between validations, "epoch" (after each epoch) or "off" (never; no best.pt); 0 also means "epoch".
-    val_every: Union[int, str, bool] = "epoch"
+    # Steps between validations, "epoch" (after each epoch) or "off" (never; no best.pt).
+    val_every: Union[int, str] = "epoch"
     val_samples: int = 500  # validation uses at most this many val-split samples, spread evenly
     # best.pt: lowest "val_photometric" (self-supervised, the default) or "abs_rel" (needs LiDAR
     # ground truth in the val split: supervised model selection, named as such in every report)
@@ -175,19 +214,10 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
 
     def validate(self) -> Config:
-        self._check_ranges()
-        m, lo, t = self.model, self.loss, self.train
+        self._check_rules()
+        m, lo = self.model, self.loss
         if m.min_depth >= m.max_depth:
             raise PoseconsError(f"model.min_depth ({m.min_depth}) must be below model.max_depth ({m.max_depth})")
-        if t.val_every is False:  # YAML 1.1 reads a bare `off` as false
-            t.val_every = "off"
-        elif t.val_every == 0:  # the old spelling of "epoch", in the configs of earlier runs
-            t.val_every = "epoch"
-        if t.val_every not in ("epoch", "off") and (type(t.val_every) is not int or t.val_every < 1):
-            raise PoseconsError(
-                f'train.val_every must be a number of steps ≥ 1, "epoch" (after each epoch) '
-                f'or "off"; got {t.val_every!r}'
-            )
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(
                 f"model.height/width must be positive multiples of 32 (the encoder downsamples 32×); "
@@ -196,44 +226,23 @@ class Config:
             )
         if min(m.height, m.width) < 64:  # the 1/32-size features must be ≥ 2 pixels for their reflection padding
             raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
-        if m.num_layers not in (10, 18, 34, 50):
-            raise PoseconsError(f"model.num_layers must be 10, 18, 34 or 50, got {m.num_layers}")
-        if m.pretrained not in (True, False, "auto"):
-            raise PoseconsError(f"model.pretrained must be true, false or 'auto', got {m.pretrained!r}")
-        if not m.frame_ids or m.frame_ids[0] != 0 or len(set(m.frame_ids)) != len(m.frame_ids):
-            raise PoseconsError(f"model.frame_ids must start with 0 and have no repeats, got {m.frame_ids}")
-        bad = [c for c in lo.constraints if c not in CONSTRAINTS]
-        if bad:
-            raise PoseconsError(f"loss.constraints: unknown {bad}; choose from {list(CONSTRAINTS)}")
         if "cyc" in lo.constraints and not (min(m.frame_ids) < 0 < max(m.frame_ids)):
             raise PoseconsError(
                 "the cyc constraint needs model.frame_ids to hold a past and a future frame, "
                 f"e.g. [0, -1, 1]; got {m.frame_ids}"
             )
-        if self.train.precision not in ("32", "bf16", "16", "auto"):
-            raise PoseconsError(f"train.precision must be '32', 'bf16', '16' or 'auto', got {self.train.precision!r}")
-        if self.train.best_metric not in ("val_photometric", "abs_rel"):
-            raise PoseconsError(
-                f"train.best_metric must be 'val_photometric' or 'abs_rel', got {self.train.best_metric!r}"
-            )
-        if self.train.keep_epochs < -1:
-            raise PoseconsError(
-                f"train.keep_epochs must be -1 (keep all), 0 (none) or a count, got {self.train.keep_epochs}"
-            )
-        if self.data.dataset not in ("kitti_raw", "kitti_odom"):
-            raise PoseconsError(f"data.dataset must be kitti_raw or kitti_odom, got {self.data.dataset!r}")
         return self
 
-    def _check_ranges(self) -> None:
+    def _check_rules(self) -> None:
         for section in dataclasses.fields(self):
             for item in dataclasses.fields(getattr(self, section.name)):
                 key, value = f"{section.name}.{item.name}", getattr(getattr(self, section.name), item.name)
                 numbers = value if isinstance(value, list) else [value]
                 if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
                     raise PoseconsError(f"{key} must be a finite number, got {value!r}")
-                test, rule = RANGES.get(key, (None, ""))
-                if test is not None and not test(value):
-                    raise PoseconsError(f"{key} {rule}, got {value!r}")
+                error = RULES[key](key, value) if key in RULES else None
+                if error:
+                    raise PoseconsError(error)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -266,6 +275,11 @@ def _check_type(value: Any, hint: Any, key: str) -> Any:
     return value
 
 
+def _respelled(key: str, value: Any) -> Any:
+    """``value`` in the one spelling a config holds (:data:`RESPELLED`)."""
+    return next((new for old, new in RESPELLED.get(key, ()) if type(value) is type(old) and value == old), value)
+
+
 def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
     hints = typing.get_type_hints(type(obj))
     names = {f.name for f in dataclasses.fields(obj)}
@@ -281,7 +295,7 @@ def _merge(obj: Any, updates: dict[str, Any], prefix: str = "") -> None:
                 raise PoseconsError(f"config key {full}: expected a mapping, got {value!r}")
             _merge(current, value, full + ".")
         else:
-            setattr(obj, key, _check_type(value, hints[key], full))
+            setattr(obj, key, _check_type(_respelled(full, value), hints[key], full))
 
 
 def _retired(key: str, value: Any) -> bool:

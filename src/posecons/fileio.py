@@ -1,4 +1,4 @@
-"""The one way posecons writes files.
+"""The one way posecons writes files, and the checks of the paths it reads and writes.
 
 * Every file appears complete or not at all: it is written under a temporary name beside its
   target, synced to disk and renamed at the end, so an error, a kill or a crash of the machine
@@ -57,6 +57,13 @@ def check_writable(path: str | Path, folder: bool = False) -> Path:
         raise PoseconsError(f"{path}: cannot be created, {anchor} is a file")
     if not os.access(anchor, os.W_OK | os.X_OK):
         raise PoseconsError(f"{path}: no permission to write in {anchor}")
+    return path
+
+
+def require_file(path: Path, what: str) -> Path:
+    """Return ``path`` if it is a file, else raise naming it and what it should have been."""
+    if not path.is_file():
+        raise PoseconsError(f"{path}: {what} not found")
     return path
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import NamedTuple
 from urllib.error import URLError
 
 import torch
@@ -58,27 +59,31 @@ def imagenet_weights_name(num_layers: int) -> str:
     return f"torchvision {type(weights).__name__}.{weights.name}" if weights is not None else "none"
 
 
+class BatchGroups(NamedTuple):
+    """How a training batch of the pose net splits into groups for :class:`GroupedBatchNorm2d`."""
+
+    sizes: tuple[int, ...]  # of the consecutive groups, summing to the batch
+    tracked: int  # the first groups, which update the running statistics
+
+
 class GroupedBatchNorm2d(nn.BatchNorm2d):
-    """BatchNorm2d that, in training, normalises each group of consecutive samples (``sizes``, a
-    tuple summing to the batch) on its own and lets only the first ``tracked`` groups update the
-    running statistics, one after the other — what separate calls per group would do, in one pass
-    of the surrounding network.
+    """BatchNorm2d that, in training, normalises each group of consecutive samples (``groups.sizes``)
+    on its own and lets only the first ``groups.tracked`` update the running statistics, one after the
+    other — what separate calls per group would do, in one pass of the surrounding network.
 
     The pose net sees every pair of a step in one batch (temporal pairs first, then the
     constraints' reversed, identity and skip pairs): grouping keeps the constraint pairs from
     changing the warping poses, and tracking only the temporal pairs keeps them out of the
-    statistics used at evaluation. Groups may differ in size. In eval mode it is a plain BatchNorm2d.
+    statistics used at evaluation. Groups may differ in size. In eval mode, or without ``groups``
+    (or with one group), it is a plain BatchNorm2d.
     """
 
-    sizes: tuple[int, ...] = ()  # () or one group: the whole batch
-    tracked: int = 1
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if not self.training or len(self.sizes) <= 1:
+    def forward(self, x: torch.Tensor, groups: BatchGroups | None = None) -> torch.Tensor:
+        if not self.training or groups is None or len(groups.sizes) <= 1:
             return super().forward(x)
         out = []
-        for i, chunk in enumerate(x.split(self.sizes)):
-            track = i < self.tracked
+        for i, chunk in enumerate(x.split(groups.sizes)):
+            track = i < groups.tracked
             out.append(
                 F.batch_norm(
                     chunk,
@@ -91,8 +96,29 @@ class GroupedBatchNorm2d(nn.BatchNorm2d):
                     self.eps,
                 )
             )
-        self.num_batches_tracked.add_(self.tracked)
+        self.num_batches_tracked.add_(groups.tracked)
         return torch.cat(out)
+
+
+def _grouped_block(block: nn.Module, x: torch.Tensor, groups: BatchGroups | None) -> torch.Tensor:
+    """torchvision's BasicBlock / Bottleneck forward, the same ops in the same order, with ``groups``
+    given to each of its GroupedBatchNorm2d layers."""
+    out = block.relu(block.bn1(block.conv1(x), groups))
+    out = block.bn2(block.conv2(out), groups)
+    if isinstance(block, tvm.resnet.Bottleneck):
+        out = block.bn3(block.conv3(block.relu(out)), groups)
+    identity = x if block.downsample is None else block.downsample[1](block.downsample[0](x), groups)
+    out += identity
+    return block.relu(out)
+
+
+class GroupedLayer(nn.Sequential):
+    """A ResNet stage (the same blocks and keys) that passes the batch's groups on to its blocks."""
+
+    def forward(self, x: torch.Tensor, groups: BatchGroups | None = None) -> torch.Tensor:
+        for block in self:
+            x = _grouped_block(block, x, groups)
+        return x
 
 
 class ResnetEncoder(nn.Module):
@@ -101,7 +127,8 @@ class ResnetEncoder(nn.Module):
     ``imagenet``: the ResNet's ImageNet state dict (:func:`load_imagenet_state`) or None for a
     random initialisation. ``num_input_images=2`` widens conv1 to a 6-channel frame pair (the pose
     encoder); ImageNet conv1 weights are then tiled over both images and halved, so a pair of
-    equal images gives the pretrained response. ``norm_layer`` replaces BatchNorm2d (same keys).
+    equal images gives the pretrained response. ``grouped``: GroupedBatchNorm2d layers and stages
+    that take the batch's :class:`BatchGroups` (the pose encoder; the same keys).
     """
 
     def __init__(
@@ -109,12 +136,14 @@ class ResnetEncoder(nn.Module):
         num_layers: int = 18,
         imagenet: dict | None = None,
         num_input_images: int = 1,
-        norm_layer: type[nn.BatchNorm2d] = nn.BatchNorm2d,
+        grouped: bool = False,
     ):
         super().__init__()
         if num_layers not in _RESNETS:
             raise PoseconsError(f"num_layers must be one of {sorted(_RESNETS)}, got {num_layers}")
-        self.net = _RESNETS[num_layers][0](norm_layer=norm_layer)
+        self.net = _RESNETS[num_layers][0](norm_layer=GroupedBatchNorm2d if grouped else nn.BatchNorm2d)
+        for name in ("layer1", "layer2", "layer3", "layer4") if grouped else ():
+            setattr(self.net, name, GroupedLayer(*getattr(self.net, name)))
         self.num_input_images = num_input_images
         state = None if imagenet is None else dict(imagenet)  # the caller's dict stays as it was
         if num_input_images > 1:
@@ -127,8 +156,9 @@ class ResnetEncoder(nn.Module):
         expansion = 4 if num_layers >= 50 else 1
         self.num_ch_enc = [64] + [c * expansion for c in (64, 128, 256, 512)]
 
-    def forward(self, images: torch.Tensor) -> list[torch.Tensor]:
-        """images (B, 3·n, H, W) in [0, 1], H and W multiples of 32 → five feature maps."""
+    def forward(self, images: torch.Tensor, groups: BatchGroups | None = None) -> list[torch.Tensor]:
+        """images (B, 3·n, H, W) in [0, 1], H and W multiples of 32 → five feature maps; ``groups``
+        (a ``grouped`` encoder only) reach every BatchNorm layer."""
         check_tensor("images", images, (None, 3 * self.num_input_images, None, None))
         h, w = images.shape[-2:]
         if h % 32 or w % 32:
@@ -137,12 +167,13 @@ class ResnetEncoder(nn.Module):
                 f"{max(32, round(h / 32) * 32)}×{max(32, round(w / 32) * 32)} (height×width)"
             )
         n = self.net
-        x = n.relu(n.bn1(n.conv1((images - 0.45) / 0.225)))
+        grouping = () if groups is None else (groups,)  # a plain BatchNorm2d takes no groups
+        x = n.relu(n.bn1(n.conv1((images - 0.45) / 0.225), *grouping))
         feats = [x]
-        x = n.layer1(n.maxpool(x))
+        x = n.layer1(n.maxpool(x), *grouping)
         feats.append(x)
         for layer in (n.layer2, n.layer3, n.layer4):
-            x = layer(x)
+            x = layer(x, *grouping)
             feats.append(x)
         return feats
 
@@ -230,7 +261,7 @@ class PoseNet(nn.Module):
 
     def __init__(self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False):
         super().__init__()
-        self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, norm_layer=GroupedBatchNorm2d)
+        self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, grouped=True)
         self.mirror = mirror
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
 
@@ -255,10 +286,8 @@ class PoseNet(nn.Module):
         if self.mirror:  # each group followed by its mirror image, so that it shares the group's statistics
             pairs = torch.cat([torch.cat([g, g.flip(-1)]) for g in pairs.split(list(groups))])
             groups = [2 * g for g in groups]
-        for bn in self.encoder.modules():
-            if isinstance(bn, GroupedBatchNorm2d):
-                bn.sizes, bn.tracked = tuple(groups), len(groups) if tracked is None else tracked
-        axisangle, translation = self.decoder(self.encoder(pairs)[-1])
+        batch = BatchGroups(tuple(groups), len(groups) if tracked is None else tracked)
+        axisangle, translation = self.decoder(self.encoder(pairs, batch)[-1])
         if not self.mirror:
             return axisangle, translation
         # The mirror image of a motion (x ↦ −x) has t_x, and the axis-angle's y and z, negated: averaging

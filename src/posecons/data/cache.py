@@ -6,7 +6,7 @@ Layout::
     CACHE/manifest.json                              what the cache was made for, and whether it is complete
     CACHE/frames/<image path under DATA>.npy         (height, width, 3) uint8: load_resized of the image
 
-A cached array is what :func:`~posecons.data.io.load_resized` returns for the image file; the
+A cached array is what :func:`~posecons.data.images.load_resized` returns for the image file; the
 loader turns it into a sample exactly as it turns a freshly decoded one (``to_float``, then the
 flip), so batches are bit-identical with and without the cache. Every file is written atomically,
 so an interrupted build leaves whole frames and a manifest saying ``"complete": false``: the same
@@ -25,7 +25,7 @@ import numpy as np
 
 from ..config import Config
 from ..errors import PoseconsError
-from .io import JPEG_DRAFT, RESIZE, image_suffix
+from .images import JPEG_DRAFT, RESIZE, image_suffix
 
 FORMAT = "posecons frame cache v1"
 MANIFEST = "manifest.json"
@@ -112,7 +112,7 @@ class FrameCache:
         return self.folder / "frames" / Path(image).relative_to(self.data_path).with_suffix(".npy")
 
     def load(self, image: Path) -> np.ndarray:
-        """(height, width, 3) uint8 of ``image``, as :func:`~posecons.data.io.load_resized` made it."""
+        """(height, width, 3) uint8 of ``image``, as :func:`~posecons.data.images.load_resized` made it."""
         path = self.file(image)
         try:
             return np.load(path, allow_pickle=False)

@@ -14,7 +14,7 @@ from ..errors import PoseconsError
 from ..fileio import atomic_write, make_dirs, remove_temporaries, write_json
 from .cache import MANIFEST, FrameCache, cache_key, differences, read_manifest
 from .datasets import build_dataset, split_files
-from .io import load_resized
+from .images import load_resized
 from .parallel import fork_map
 
 

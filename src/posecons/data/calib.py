@@ -14,7 +14,7 @@ from typing import Union
 import numpy as np
 
 from ..errors import PoseconsError
-from .io import require_file
+from ..fileio import require_file
 
 CalibValue = Union[np.ndarray, str]
 KITTI_FIXED_K = np.array([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]], dtype=np.float32)

@@ -26,7 +26,7 @@ from ..geometry import flip_intrinsics
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
 from .cache import FrameCache
 from .calib import KITTI_FIXED_K
-from .io import image_suffix, load_resized, to_float
+from .images import image_suffix, load_resized, to_float
 from .splits import SplitLine, SplitSource, read_split
 
 
@@ -58,7 +58,7 @@ class FrameDataset(Dataset):
     (fx=0.58, fy=1.92, cx=cy=0.5); augmentation draws depend only on (seed, epoch, index);
     ``check_files`` stats every needed image (and cached frame) up front so a bad split fails
     before training; ``cache``: a :class:`~posecons.data.cache.FrameCache` to read the resized
-    frames from; ``jpeg_draft``: decode JPEGs at a reduced DCT scale (:func:`~posecons.data.io.load_resized`).
+    frames from; ``jpeg_draft``: decode JPEGs at a reduced DCT scale (:func:`~posecons.data.images.load_resized`).
     """
 
     def __init__(
@@ -164,7 +164,7 @@ class FrameDataset(Dataset):
     def load_frame(self, path: Path, flip: bool, like: tuple[Path, tuple[int, int]] | None = None) -> torch.Tensor:
         """Decode and resize exactly as evaluation and inference do (``resize_rgb``; with
         ``jpeg_draft`` a reduced JPEG decode first), or read what the cache holds of that, then flip:
-        (3, H, W) float32 in [0, 1]; ``like``: see :func:`~posecons.data.io.load_rgb`."""
+        (3, H, W) float32 in [0, 1]; ``like``: see :func:`~posecons.data.images.load_rgb`."""
         if self.cache is not None:
             pixels = self.cache.load(path)
         else:

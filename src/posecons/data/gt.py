@@ -15,12 +15,20 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-from ..fileio import atomic_file
+from ..fileio import atomic_file, require_file
 from .calib import raw_projection, velo_to_image
-from .io import load_velodyne, require_file
 from .splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
 
 DepthKind = Literal["velo_x", "camera_z"]
+
+
+def load_velodyne(path: Path) -> np.ndarray:
+    """Read a KITTI Velodyne scan: (N, 4) float32 rows of x, y, z, reflectance."""
+    require_file(path, "Velodyne scan")
+    size = path.stat().st_size
+    if size % 16:
+        raise PoseconsError(f"{path}: size {size} bytes is not a multiple of 16 (4 float32 per point)")
+    return np.fromfile(path, dtype="<f4").reshape(-1, 4)
 
 
 def velo_to_depth_map(

@@ -9,9 +9,9 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
+from ..fileio import require_file
 from .calib import calib_matrix, pixel_to_normalised, read_calib_file
 from .frames import FrameDataset
-from .io import require_file
 from .splits import SIDE_TO_CAMERA, SplitLine
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PoseconsError
-from .io import require_file
+from ..fileio import require_file
 
 EARTH_RADIUS = 6378137.0  # metres, as in the KITTI devkit
 GRAVITY = 9.81

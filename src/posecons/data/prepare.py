@@ -25,7 +25,7 @@ from PIL import Image
 from ..errors import PoseconsError
 from ..fileio import output_dir
 from .calib import format_calib
-from .io import load_rgb
+from .images import load_rgb
 from .splits import SplitLine, write_split
 
 DATE = "custom"

@@ -28,7 +28,7 @@ from ..errors import PoseconsError
 from ..fileio import keep_copy, output_dir
 from .calib import format_calib
 from .gt import read_depth_image, write_gt
-from .io import load_rgb
+from .images import load_rgb
 from .prepare import drive_folder, write_calibration, write_train_val
 from .splits import SplitLine, write_split
 from .trajectory_io import check_rigid, read_pose_matrix, read_tum, write_kitti_poses

@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import Union
 
 from ..errors import PoseconsError
-from ..fileio import write_text
-from .io import require_file
+from ..fileio import require_file, write_text
 
 BUNDLED = Path(__file__).resolve().parents[1] / "splits"
 """The standard KITTI split lists shipped with the package (origin in its NOTICE)."""

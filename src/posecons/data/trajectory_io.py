@@ -9,9 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PoseconsError
-from ..fileio import atomic_write
+from ..fileio import atomic_write, require_file
 from ..metrics.pose import quaternion_to_rotation, rotation_to_quaternion
-from .io import require_file
 
 KITTI_RATE_HZ = 10.0  # timestamps (frame index / 10 Hz) when no times file is given
 RIGID_TOLERANCE = 1e-2  # largest |R·Rᵀ − I| entry accepted as a rotation: 7-Scenes' own poses reach 3.2e-4

@@ -204,8 +204,16 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         if args.eigen_to_benchmark:
             disps = evaluate.eigen_to_benchmark(disps, split, pred_name)
 
-    result = evaluate.depth_result(
-        disps, gts, split, args.scaling, gt_kind, pred_name, str(gt_path), args.scale_factor or 1.0, depth_range
+    result = evaluate.evaluate_depth(
+        disps,
+        gts,
+        split,
+        gt_kind,
+        pred_name,
+        scaling=args.scaling,
+        gt_name=str(gt_path),
+        scale_factor=args.scale_factor or 1.0,
+        depth_range=depth_range,
     )
     if args.checkpoint is not None:
         result.update(checkpoint=describe_checkpoint(args.checkpoint))
@@ -214,7 +222,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         post_process=bool(args.checkpoint and args.post_process),
         eigen_to_benchmark=args.eigen_to_benchmark,
     )
-    print(compare.markdown_table([result], [Path(pred_name).stem], bold=False), end="")
+    print(compare.results_table([result], [Path(pred_name).stem], bold=False), end="")
     print(
         f"{result['n_frames']} frames, scaling {result['scaling']}"
         + (f" × {result['scale_factor']:g}" if result["scale_factor"] != 1 else "")
@@ -257,7 +265,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
         checkpoint = None
 
-    result = evaluate.pose_result(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
+    result = evaluate.evaluate_pose(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")
@@ -279,7 +287,7 @@ def compare_command(args: argparse.Namespace) -> int:
 
     results = [compare.load_result(path) for path in args.results]
     names = args.names or [compare.default_name(path) for path in args.results]
-    table = compare.markdown_table(results, names)
+    table = compare.results_table(results, names)
     print(table, end="")
     if args.out:
         write_text(args.out, table)

@@ -1,4 +1,5 @@
-"""Markdown tables in the layout of the paper's Table 1 from depth-evaluation JSON files."""
+"""Markdown tables: the one renderer of the paper's Table 1 layout (``compare``, ``evaluate-depth``,
+the demo's and a study's reports), and Table 1 from depth-evaluation JSON files."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ from pathlib import Path
 
 from ..errors import PoseconsError
 
-# (JSON key, column header, higher is better); σ/μ is the mean over sequences of the frame scales' σ/μ.
-TABLE1_COLUMNS = (
-    ("scale_cv", "σ/μ", False),
+# (JSON key, column header, higher is better) of the paper's Table 1: σ/μ, the mean over sequences
+# of the frame scales' σ/μ, then the Eigen metrics (a_k is δ < 1.25^k).
+EIGEN_COLUMNS = (
     ("abs_rel", "Abs Rel", False),
     ("sq_rel", "Sq Rel", False),
     ("rmse", "RMSE", False),
@@ -20,6 +21,8 @@ TABLE1_COLUMNS = (
     ("a2", "δ<1.25²", True),
     ("a3", "δ<1.25³", True),
 )
+TABLE1_COLUMNS = (("scale_cv", "σ/μ", False), *EIGEN_COLUMNS)
+DIGITS = ".3f"  # as the paper prints them
 RUN_RESULT = Path("eval") / "depth.json"  # where a run directory keeps its depth evaluation
 
 
@@ -41,14 +44,28 @@ def load_result(path: str | Path) -> dict:
     return result
 
 
-def _cell(value: float | None) -> str:
-    return "–" if value is None or not math.isfinite(value) else f"{value:.3f}"
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A Markdown table: the first column left-aligned (names), the others right-aligned (numbers)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join([" --- "] + [" ---: "] * (len(header) - 1)) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows]) + "\n"
 
 
-def table1_header() -> list[str]:
-    """The two Markdown header lines of a Table-1 layout with a leading name column."""
-    headers = ["Method"] + [header for _, header, _ in TABLE1_COLUMNS]
-    return ["| " + " | ".join(headers) + " |", "|" + "|".join([" --- "] + [" ---: "] * len(TABLE1_COLUMNS)) + "|"]
+def table1(rows: Sequence[Sequence[str]], lead: Sequence[str] = ("Method",), scale: Sequence[str] = ("σ/μ",)) -> str:
+    """The paper's Table 1 layout: the ``lead`` columns (a row's name, ...), the scale-consistency
+    columns ``scale`` (the paper's σ/μ; a study adds per-sequence ones), then the Eigen metrics of
+    :data:`EIGEN_COLUMNS`; ``rows``: each row's printed cells in that order."""
+    return markdown_table([*lead, *scale, *(header for _, header, _ in EIGEN_COLUMNS)], rows)
+
+
+def result_cells(result: dict, scale_format: str = DIGITS) -> list[str]:
+    """A depth result's printed Table-1 cells (:data:`TABLE1_COLUMNS`), σ/μ in ``scale_format``; '–'
+    where a value is missing."""
+    formats = [scale_format] + [DIGITS] * len(EIGEN_COLUMNS)
+    return [_cell(result.get(key), fmt) for (key, _, _), fmt in zip(TABLE1_COLUMNS, formats)]
+
+
+def _cell(value: float | None, fmt: str) -> str:
+    return "–" if value is None or not math.isfinite(value) else f"{value:{fmt}}"
 
 
 def default_name(path: str | Path) -> str:
@@ -59,11 +76,11 @@ def default_name(path: str | Path) -> str:
     return path.parents[1].name if path.parent.name == RUN_RESULT.parent.name else path.stem
 
 
-def markdown_table(results: Sequence[dict], names: Sequence[str], bold: bool = True) -> str:
-    """Table-1 layout, one row per result; with ``bold`` the best value of each column (as printed) is bold."""
+def results_table(results: Sequence[dict], names: Sequence[str], bold: bool = True) -> str:
+    """Table 1, one row per result; with ``bold`` the best value of each column (as printed) is bold."""
     if len(names) != len(results):
         raise PoseconsError(f"{len(names)} names for {len(results)} results")
-    cells = [[_cell(result.get(key)) for key, _, _ in TABLE1_COLUMNS] for result in results]
+    cells = [result_cells(result) for result in results]
     for col, (_, _, higher_better) in enumerate(TABLE1_COLUMNS if bold else ()):
         printed = [float(row[col]) for row in cells if row[col] != "–"]
         if printed:
@@ -71,13 +88,12 @@ def markdown_table(results: Sequence[dict], names: Sequence[str], bold: bool = T
             for row in cells:
                 if row[col] != "–" and float(row[col]) == best:
                     row[col] = f"**{row[col]}**"
-    lines = table1_header() + ["| " + " | ".join([name, *row]) + " |" for name, row in zip(names, cells)]
     notes = [
-        f"- {name}: {checkpoint_note(result['checkpoint'])}"
+        f"- {name}: {checkpoint_note(result['checkpoint'])}\n"
         for name, result in zip(names, results)
         if "checkpoint" in result
     ]
-    return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
+    return table1([[name, *row] for name, row in zip(names, cells)]) + ("\n" + "".join(notes) if notes else "")
 
 
 def checkpoint_note(info: dict) -> str:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -20,10 +21,10 @@ from ..data.splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
 from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
-from ..inference.io import frames_from_paths
+from ..inference.media import frames_from_paths
 from ..inference.stabilise import DEFAULT_TIME_CONSTANT, stabilise
-from ..metrics.depth import CROP_FOR_GT_KIND, evaluate_depth
-from ..metrics.pose import align_trajectory, evaluate_pose, global_from_relative
+from ..metrics.depth import CROP_FOR_GT_KIND, depth_metrics
+from ..metrics.pose import align_trajectory, global_from_relative, pose_metrics
 from ..plots import plot_error_histogram, plot_scale_boxplot, plot_scale_over_time, plot_trajectory_topview
 
 
@@ -85,31 +86,20 @@ def load_pred_disps(path: Path) -> np.ndarray:
         raise PoseconsError(f"{path}: not a .npy array of numbers (damaged, or not written by numpy.save)") from None
 
 
-def depth_result(
+def evaluate_depth(
     disps: np.ndarray,
     gts: Sequence[np.ndarray],
     lines: Sequence[SplitLine],
-    scaling: str = "frame",
     gt_kind: str = "lidar",
     pred_name: str = "predictions",
-    gt_name: str = "ground truth",
-    scale_factor: float = 1.0,
-    depth_range: tuple[float, float] | None = None,
+    **options: Any,
 ) -> dict:
-    """:func:`~posecons.metrics.depth.evaluate_depth` of (N, h, w) disparities against N GT maps of the
-    N split ``lines`` (which give the sequences), with ``gt_kind``, ``predictions`` and ``skipped_lines``
-    added."""
-    result = evaluate_depth(
-        disps,
-        gts,
-        [s.folder for s in lines],
-        scaling=scaling,
-        crop=CROP_FOR_GT_KIND[gt_kind],
-        pred_name=pred_name,
-        gt_name=gt_name,
-        scale_factor=scale_factor,
-        depth_range=depth_range,
-    )
+    """:func:`~posecons.metrics.depth.depth_metrics` of (N, h, w) disparities against N GT maps of the
+    N split ``lines`` (which give the sequences), with the crop of ``gt_kind`` and its other
+    ``options`` (``scaling``, ``gt_name``, ``scale_factor``, ``depth_range``); ``gt_kind``, ``predictions`` and
+    ``skipped_lines`` added."""
+    sequences = [s.folder for s in lines]
+    result = depth_metrics(disps, gts, sequences, crop=CROP_FOR_GT_KIND[gt_kind], pred_name=pred_name, **options)
     result.update(gt_kind=gt_kind, predictions=pred_name, skipped_lines=[str(lines[i]) for i in result["skipped"]])
     return result
 
@@ -127,7 +117,7 @@ def eigen_to_benchmark(disps: np.ndarray, lines: Sequence[SplitLine], pred_name:
     return disps[[eigen[str(line)] for line in lines]]
 
 
-def pose_result(
+def evaluate_pose(
     estimate: np.ndarray,
     gt: np.ndarray,
     const_velocity: str = "first",
@@ -135,8 +125,8 @@ def pose_result(
     gt_name: str = "ground truth",
     alignment: str = "7dof",
 ) -> dict:
-    """:func:`~posecons.metrics.pose.evaluate_pose` of (N, 4, 4) camera → world poses, with provenance."""
-    result = evaluate_pose(estimate, gt, const_velocity, alignment)
+    """:func:`~posecons.metrics.pose.pose_metrics` of (N, 4, 4) camera → world poses, with provenance."""
+    result = pose_metrics(estimate, gt, const_velocity, alignment)
     result.update(predictions=pred_name, ground_truth=gt_name)
     return result
 
@@ -153,25 +143,33 @@ def segments_note(result: dict) -> str:
     )
 
 
+def _loaded(weights: str | Path | Predictor) -> tuple[Predictor, str]:
+    """(predictor, the name its results carry) of networks already loaded, or of a path loaded here."""
+    if isinstance(weights, Predictor):
+        return weights, weights.name
+    return load_predictor(weights, "auto"), str(weights)
+
+
 def checkpoint_depth(
-    checkpoint: Path,
+    checkpoint: str | Path | Predictor,
     data_path: Path,
     split: Sequence[SplitLine],
     gt_path: Path,
     scalings: Sequence[str] = ("frame",),
     stabilised: bool = False,
 ) -> dict[str, dict]:
-    """{scaling: :func:`depth_result`} of a checkpoint's disparities (predicted once) on the ``split``
-    lines against the LiDAR ground truth exported to ``gt_path``; with ``stabilised`` also
+    """{scaling: :func:`evaluate_depth`} of a checkpoint's disparities (predicted once) on the ``split``
+    lines against the LiDAR ground truth exported to ``gt_path`` (``checkpoint``: a path, or networks
+    already loaded); with ``stabilised`` also
     {"<scaling>_stabilised": ...} of the same disparities after :func:`stabilised_disparities`, whose
     ``stabiliser_factors`` it records."""
     gts, _ = load_gt(gt_path)
-    predictor = load_predictor(checkpoint, "auto")
+    predictor, name = _loaded(checkpoint)
     runs = {"": model_disparities(predictor, data_path, split)}
     if stabilised:
         runs["_stabilised"], factors = stabilised_disparities(predictor, data_path, split, runs[""])
     results = {
-        s + suffix: depth_result(disps, gts, split, s, pred_name=str(checkpoint), gt_name=str(gt_path))
+        s + suffix: evaluate_depth(disps, gts, split, scaling=s, pred_name=name, gt_name=str(gt_path))
         for suffix, disps in runs.items()
         for s in scalings
     }
@@ -180,17 +178,20 @@ def checkpoint_depth(
     return results
 
 
-def checkpoint_pose(checkpoint: Path, odometry: Path, sequence: str, out_dir: Path | None = None) -> dict:
-    """:func:`pose_result` (snippet ATE, full ATE, t_err / r_err, constant-velocity baseline) of a checkpoint's
+def checkpoint_pose(
+    checkpoint: str | Path | Predictor, odometry: Path, sequence: str, out_dir: Path | None = None
+) -> dict:
+    """:func:`evaluate_pose` (snippet ATE, full ATE, t_err / r_err, constant-velocity baseline) of a checkpoint's
     chained steps on odometry ``sequence`` (ground truth ``odometry/poses/<NN>.txt``); with ``out_dir``
     also its trajectory files and top view (:func:`write_trajectories`)."""
     gt_file = Path(odometry) / "poses" / f"{int(sequence):02d}.txt"
     gt = read_kitti_poses(gt_file)
-    steps = model_steps(load_predictor(checkpoint, "auto"), list_sequence_frames(odometry, sequence))
+    predictor, name = _loaded(checkpoint)
+    steps = model_steps(predictor, list_sequence_frames(odometry, sequence))
     estimate = global_from_relative(steps)
     if out_dir is not None:
         write_trajectories(out_dir, estimate, gt)
-    return pose_result(estimate, gt, pred_name=str(checkpoint), gt_name=str(gt_file))
+    return evaluate_pose(estimate, gt, pred_name=name, gt_name=str(gt_file))
 
 
 def write_depth_plots(result: dict, lines: Sequence[SplitLine], out_dir: Path) -> None:

@@ -17,9 +17,9 @@ import numpy as np
 import torch
 
 from ..checkpoint import load_model
-from ..data.io import resize_rgb
+from ..data.images import resize_rgb
 from ..errors import PoseconsError
-from .io import Frame
+from .media import Frame
 
 EXPORT_INFO = "export.json"
 DEPTH_ONNX = "depth.onnx"
@@ -106,9 +106,10 @@ def _session(path: Path, providers: list[str]):
         raise PoseconsError(f"{path}: not a loadable ONNX model ({str(exc).splitlines()[0]})") from exc
 
 
-def load_predictor(path: str | Path, device: str = "cpu") -> Predictor:
+def load_predictor(path: str | Path, device: str = "cpu", entry: str = "model") -> Predictor:
     """A checkpoint (.pt / .safetensors), an export directory, or its depth.onnx → a :class:`Predictor`
-    on ``device`` (``"auto"``: cuda if available, else cpu)."""
+    on ``device`` (``"auto"``: cuda if available, else cpu); ``entry``: which weights of a ``.pt``
+    checkpoint (:func:`~posecons.checkpoint.load_model`), named after it unless they are its ``model``."""
     path = Path(path)
     if device == "auto":
         device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -118,7 +119,8 @@ def load_predictor(path: str | Path, device: str = "cpu") -> Predictor:
         return OnnxPredictor(path, device)
     if path.suffix == ".onnx":
         return OnnxPredictor(path.parent, device)
-    return TorchPredictor(load_model(path, map_location=device)[0], str(path), device)
+    name = str(path) if entry == "model" else f"{path}: {entry}"
+    return TorchPredictor(load_model(path, map_location=device, entry=entry)[0], name, device)
 
 
 def post_process_disparity(disp: torch.Tensor, disp_flipped: torch.Tensor) -> torch.Tensor:
@@ -140,7 +142,7 @@ def predict_batches(
     scaled disparities (B, 1, h, w), or None with ``depth=False``).
 
     Frames stream through, so a whole sequence never sits in memory. Images are resized to the
-    network size like the training data (:func:`~posecons.data.io.resize_rgb`); ``post_process``
+    network size like the training data (:func:`~posecons.data.images.resize_rgb`); ``post_process``
     also runs the mirrored images and blends (:func:`post_process_disparity`).
     """
     batch: list[Frame] = []

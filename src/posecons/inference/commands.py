@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from ..cli import device_name, non_negative_float, output_file, output_folder, positive_float, positive_int
-from .io import DEFAULT_FPS
+from .media import DEFAULT_FPS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -45,7 +45,7 @@ from ..plots import colorize, colour_range, plot_scale_drift, plot_scales_over_t
 from . import scale as scaling
 from .backend import Predictor, StepChain, predict_batches
 from .camera import resolve_intrinsics
-from .io import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter
+from .media import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter
 from .pointcloud import depth_to_points, write_ply
 from .stabilise import DEFAULT_TIME_CONSTANT, StreamStabiliser
 

@@ -85,7 +85,7 @@ def frame_scale(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> float:
     """The frame's median scale median(gt) / median(pred) over the pixels of ``mask``; gt and pred are
     depths (H, W) at the GT size (pred resized as disparity, then inverted). NaN when ``mask`` is empty.
 
-    The caller chooses the mask. :func:`evaluate_depth` passes :func:`valid_mask` of its crop (the Garg
+    The caller chooses the mask. :func:`depth_metrics` passes :func:`valid_mask` of its crop (the Garg
     crop and the 80 m cap for LiDAR GT): the published protocol, comparable with the literature.
     ``predict``'s calibration and drift pass ``valid_mask(gt, "none")`` (every finite gt > 0): its GT
     comes with any camera, not only the KITTI LiDAR the crop was cut for, and the scale it finds
@@ -201,7 +201,7 @@ def scale_factors(scales: np.ndarray, sequences: Sequence[str], scaling: str, fi
     return factors
 
 
-def evaluate_depth(
+def depth_metrics(
     pred_disps: np.ndarray | Sequence[np.ndarray],
     gt_depths: Sequence[np.ndarray],
     sequences: Sequence[str],

@@ -239,7 +239,7 @@ def constant_velocity_steps(gt_steps: np.ndarray, mode: str = "first") -> np.nda
     raise PoseconsError(f"unknown constant-velocity mode {mode!r}; expected one of {CONST_VELOCITY_MODES}")
 
 
-def pose_metrics(pred_global: np.ndarray, gt_global: np.ndarray, alignment: str = "7dof") -> dict:
+def trajectory_metrics(pred_global: np.ndarray, gt_global: np.ndarray, alignment: str = "7dof") -> dict:
     """All pose metrics of (N, 4, 4) predicted against (N, 4, 4) GT camera → world poses.
 
     The snippet ATE uses the steps of both trajectories; the full ATE the predicted trajectory after
@@ -258,10 +258,10 @@ def pose_metrics(pred_global: np.ndarray, gt_global: np.ndarray, alignment: str 
     }
 
 
-def evaluate_pose(
+def pose_metrics(
     pred_global: np.ndarray, gt_global: np.ndarray, const_velocity: str = "first", alignment: str = "7dof"
 ) -> dict:
-    """:func:`pose_metrics` of (N, 4, 4) predicted camera → world poses (e.g. chained pose-net steps,
+    """:func:`trajectory_metrics` of (N, 4, 4) predicted camera → world poses (e.g. chained pose-net steps,
     :func:`global_from_relative`) plus the same metrics for a constant-velocity baseline
     (``const_velocity`` sub-dict), which shows how much of a score needs no images at all."""
     if len(gt_global) < 2:
@@ -270,7 +270,7 @@ def evaluate_pose(
         raise PoseconsError(f"{len(pred_global)} predicted poses but {len(gt_global)} ground-truth poses")
     baseline = global_from_relative(constant_velocity_steps(relative_from_global(gt_global), const_velocity))
     return {
-        **pose_metrics(pred_global, gt_global, alignment),
+        **trajectory_metrics(pred_global, gt_global, alignment),
         "n_frames": len(gt_global),
-        "const_velocity": {"mode": const_velocity, **pose_metrics(baseline, gt_global, alignment)},
+        "const_velocity": {"mode": const_velocity, **trajectory_metrics(baseline, gt_global, alignment)},
     }

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..cli import non_negative_int, output_file, output_folder, positive_int
+from ..cli import add_accelerator, non_negative_int, output_file, output_folder, positive_int
 from ..errors import PoseconsError
 
 
@@ -35,9 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", nargs="+", type=non_negative_int, metavar="K", help="these seeds in place of the spec's")
     p.add_argument("--data-path", type=Path, help="KITTI raw root, in place of the spec's data.path")
     p.add_argument("--odometry-path", type=Path, help="KITTI odometry root, in place of the spec's data.odometry")
-    p.add_argument(
-        "--accelerator", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when a GPU is visible"
-    )
+    add_accelerator(p)
     p.add_argument(
         "--jobs",
         type=positive_int,

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import PoseconsError
+from ..evaluation.compare import DIGITS, EIGEN_COLUMNS, markdown_table, table1
 from ..fileio import output_dir, write_text
 from ..metrics.stats import ALPHA, MIN_SEEDS, POWER, compare, mean_std, paired_differences
 from .spec import FLOOR, UNTRAINED
@@ -23,16 +24,6 @@ from .spec import FLOOR, UNTRAINED
 STUDY_FILE = "study.json"
 FAILED = "failed"  # the subfolder of the failed runs' records
 Getter = Callable[[dict], Any]
-# (JSON key, header, format) of the Eigen metrics; a_k is δ < 1.25^k.
-DEPTH_COLUMNS = (
-    ("abs_rel", "abs rel", ".3f"),
-    ("sq_rel", "sq rel", ".3f"),
-    ("rmse", "rmse", ".3f"),
-    ("rmse_log", "rmse log", ".3f"),
-    ("a1", "δ<1.25", ".3f"),
-    ("a2", "δ<1.25²", ".3f"),
-    ("a3", "δ<1.25³", ".3f"),
-)
 POSE_COLUMNS = (
     ("ate_mean", "snippet ATE mean", ".4f"),
     ("ate_std", "snippet ATE std", ".4f"),
@@ -99,11 +90,6 @@ def cell(values: Sequence[float], fmt: str) -> str:
     return f"{mean:{fmt}}" if math.isnan(std) else f"{mean:{fmt}} ± {std:{fmt}}"
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join([" --- "] + [" ---: "] * (len(header) - 1)) + "|"]
-    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows]) + "\n"
-
-
 def _rows(names: Sequence[str], columns: Sequence[tuple[Getter, str]], results: Sequence[dict]) -> list[list[str]]:
     """One row per variant name: its number of seeds, then each column's cell over them."""
     rows = []
@@ -143,18 +129,16 @@ def depth_tables(names: Sequence[str], results: Sequence[dict]) -> str:
         (_depth("frame", "scale_cv"), ".4f"),
         (_depth("frame", "scale_std_over_median"), ".4f"),
     ]
-    frame_cols += [(_depth("frame", key), fmt) for key, _, fmt in DEPTH_COLUMNS]
-    header = ["variant", "n"] + [f"σ/μ {short_name(s)}" for s in sequences] + ["σ/μ mean", "σ/median pooled"]
-    header += [h for _, h, _ in DEPTH_COLUMNS]
-    seq_cols = [(_depth("sequence", key), fmt) for key, _, fmt in DEPTH_COLUMNS]
+    frame_cols += [(_depth("frame", key), DIGITS) for key, _, _ in EIGEN_COLUMNS]
+    scale = [f"σ/μ {short_name(s)}" for s in sequences] + ["σ/μ mean", "σ/median pooled"]
+    seq_cols = [(_depth("sequence", key), DIGITS) for key, _, _ in EIGEN_COLUMNS]
     return (
         "### Frame-median scaling (each frame scaled by median(gt)/median(pred))\n\n"
-        + _table(header, _rows(names, frame_cols, results))
+        + table1(_rows(names, frame_cols, results), ["variant", "n"], scale)
         + "\n### Per-sequence scaling (one factor per sequence: the median of its frame scales)\n\n"
         "σ/μ does not depend on the scaling (it is computed from the same per-frame scales), so only the "
         "error metrics are repeated; with one factor per sequence, a scale that drifts within a sequence "
-        "shows up as error.\n\n"
-        + _table(["variant", "n"] + [h for _, h, _ in DEPTH_COLUMNS], _rows(names, seq_cols, results))
+        "shows up as error.\n\n" + table1(_rows(names, seq_cols, results), ["variant", "n"], [])
     )
 
 
@@ -173,7 +157,8 @@ def pose_tables(names: Sequence[str], results: Sequence[dict]) -> str:
             + [cell([_number(_pose(seq, key, True)(baseline))], fmt) for key, _, fmt in POSE_COLUMNS]
         )
         text.append(
-            f"### Odometry sequence {seq}\n\n" + _table(["variant", "n"] + [h for _, h, _ in POSE_COLUMNS], rows)
+            f"### Odometry sequence {seq}\n\n"
+            + markdown_table(["variant", "n"] + [h for _, h, _ in POSE_COLUMNS], rows)
         )
     return "\n".join(text)
 
@@ -295,7 +280,7 @@ def paired_table(rows: Sequence[dict], reference: str) -> str:
         "signs",
         "verdict",
     ]
-    return _table(header, cells)
+    return markdown_table(header, cells)
 
 
 def _figure1(variants: Sequence[str], results: Sequence[dict], figures: Path) -> str:
@@ -371,7 +356,7 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
         f"\n- **failed** (the same command retries it): {f['variant']} seed {f['seed']}: {f['error']} (log: `{f['log']}`)"
         for f in failures
     )
-    overview = _table(
+    overview = markdown_table(
         ["variant", "overrides (after the spec's)", "runs done", "steps", "train minutes"],
         [
             [

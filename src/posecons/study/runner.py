@@ -34,9 +34,10 @@ import platform
 import signal
 import subprocess
 import sys
-import tempfile
+import threading
 import time
 import traceback
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -55,6 +56,7 @@ from ..data.synth.oracle import oracle_disparities
 from ..errors import Interrupted, PoseconsError
 from ..evaluation import evaluate
 from ..fileio import check_writable, make_dirs, write_json, write_text
+from ..inference.backend import Predictor, load_predictor
 from ..training.trainer import run_in_progress, save_initial_weights, train
 from .report import FAILED, STUDY_FILE, read_json, write_report
 from .spec import FLOOR, UNTRAINED, StudySpec
@@ -220,8 +222,8 @@ def environment(accelerator: str) -> dict[str, str]:
     }
 
 
-def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
-    """Depth with both scalings and pose on each test sequence of one checkpoint."""
+def evaluate_weights(checkpoint: Path | Predictor, data: StudyData) -> dict[str, Any]:
+    """Depth with both scalings and pose on each test sequence of one checkpoint (or of its networks)."""
     depth = evaluate.checkpoint_depth(checkpoint, data.train_path, data.split, data.gt, SCALINGS)
     pose = {seq: evaluate.checkpoint_pose(checkpoint, data.odometry, seq) for seq in data.sequences}
     return {"depth": depth, "pose": pose, "test_lines": [str(line) for line in data.split]}
@@ -230,15 +232,9 @@ def evaluate_weights(checkpoint: Path, data: StudyData) -> dict[str, Any]:
 def raw_weights_result(checkpoint: Path, data: StudyData) -> dict[str, Any]:
     """With ``train.ema_decay``, the raw weights of the same step evaluated as the EMA is: the EMA's
     effect paired on one trajectory (experiments/investigation.md §7). Empty for a checkpoint without an EMA."""
-    state = load_checkpoint(checkpoint)
-    if "raw_model" not in state:
+    if "raw_model" not in load_checkpoint(checkpoint):
         return {}
-    with tempfile.TemporaryDirectory() as tmp:
-        raw = Path(tmp) / "raw.pt"
-        torch.save({"config": state["config"], "model": state["raw_model"], "step": state["step"]}, raw)
-        result = evaluate_weights(raw, data)
-    for part in (*result["depth"].values(), *result["pose"].values()):  # not the temporary file
-        part["predictions"] = f"{checkpoint}: raw_model"
+    result = evaluate_weights(load_predictor(checkpoint, "auto", entry="raw_model"), data)
     return {"raw_weights": {"depth": result["depth"], "pose": result["pose"]}}
 
 
@@ -250,7 +246,8 @@ def depth_floor(spec: StudySpec, data: StudyData) -> dict[str, Any]:
     gts, _ = load_gt(data.gt)
     name = f"the renderer's depth at {m.width}×{m.height}"
     depth = {
-        s: evaluate.depth_result(disps, gts, data.split, s, pred_name=name, gt_name=str(data.gt)) for s in SCALINGS
+        s: evaluate.evaluate_depth(disps, gts, data.split, scaling=s, pred_name=name, gt_name=str(data.gt))
+        for s in SCALINGS
     }
     return {"variant": FLOOR, "seed": 0, "depth": depth}
 
@@ -321,49 +318,68 @@ def _run_side_by_side(
     import torch
 
     threads = spec.threads or max(1, torch.get_num_threads() // jobs)
-    pending, running, stopped, failed = list(todo), {}, [], []
+    unsignalled: dict[tuple[str, int], subprocess.Popen] = {}  # the running runs no signal has reached
+    stopped: list[int] = []
+    lock = threading.Lock()  # the progress lines and counts, shared by the lanes and this thread
 
     def forward(signum: int, frame: Any) -> None:
         stopped.append(signum)
-        for proc, _, _ in running.values():
-            proc.send_signal(signum)
+        for run in list(unsignalled):
+            # the dict's pop is atomic: of this handler and a lane that has just started the run, one signals it
+            proc = unsignalled.pop(run, None)
+            if proc is not None:
+                proc.send_signal(signum)
 
+    def lane(variant: str, seed: int) -> tuple[int, Path, float] | None:
+        """Start the run (unless the study stopped, or another process has it) and wait for it to end."""
+        with lock:
+            if stopped or progress.taken(out, variant, seed):
+                return None
+            run_dir = out / "runs" / variant / f"seed{seed}"
+            run_dir.mkdir(parents=True, exist_ok=True)
+            log = open(run_dir / "study.log", "a")  # noqa: SIM115 (closed when the run ends)
+            command = [sys.executable, "-m", "posecons.study.worker", str(spec.file), str(out), variant, str(seed)]
+            command += ["--accelerator", accelerator]
+            command += [
+                f"--{arg}-path={spec.data[k]}"
+                for arg, k in (("data", "path"), ("odometry", "odometry"))
+                if k in spec.data
+            ]
+            env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
+            proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+            unsignalled[variant, seed], started = proc, time.monotonic()
+            progress.line(f"start {variant} seed {seed} → {run_dir}, {threads} thread(s) ({progress.left} runs left)")
+        if stopped and unsignalled.pop((variant, seed), None):  # a signal came before the run was listed
+            proc.send_signal(stopped[0])
+        with log:
+            proc.wait()
+        unsignalled.pop((variant, seed), None)
+        return proc.returncode, Path(log.name), started
+
+    # The pool's threads only start the runs' processes and wait for them: the runs are not the workers
+    # of a ProcessPoolExecutor, which share the study's session (a Ctrl-C would reach a run twice, from
+    # the terminal and passed on, and a second signal stops a run at once, not at a step boundary), keep
+    # their pids to themselves (nothing to pass a signal on to), and break the pool, failing every other
+    # run, when one of them dies (killed, out of memory).
+    failed: list[str] = []
     previous = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        while running or (pending and not stopped):
-            while pending and len(running) < jobs and not stopped:
-                variant, seed = pending.pop(0)
-                if progress.taken(out, variant, seed):
+        with ThreadPoolExecutor(jobs) as pool:
+            lanes = {pool.submit(lane, variant, seed): (variant, seed) for variant, seed in todo}
+            for future in as_completed(lanes):
+                ended = future.result()
+                if ended is None:
                     continue
-                run_dir = out / "runs" / variant / f"seed{seed}"
-                run_dir.mkdir(parents=True, exist_ok=True)
-                log = open(run_dir / "study.log", "a")  # noqa: SIM115 (closed when the run ends)
-                command = [sys.executable, "-m", "posecons.study.worker", str(spec.file), str(out), variant, str(seed)]
-                command += ["--accelerator", accelerator]
-                command += [
-                    f"--{arg}-path={spec.data[k]}"
-                    for arg, k in (("data", "path"), ("odometry", "odometry"))
-                    if k in spec.data
-                ]
-                env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
-                proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
-                running[variant, seed] = proc, log, time.monotonic()
-                progress.line(
-                    f"start {variant} seed {seed} → {run_dir}, {threads} thread(s) ({progress.left} runs left)"
-                )
-            time.sleep(1)
-            for (variant, seed), (proc, log, started) in list(running.items()):
-                if proc.poll() is None:
-                    continue
-                log.close()
-                del running[variant, seed]
-                if proc.returncode == 0:
-                    progress.done(read_json(out / "results" / result_name(variant, seed)), started)
+                (variant, seed), (code, log, started) = lanes[future], ended
+                if code == 0:
+                    with lock:
+                        progress.done(read_json(out / "results" / result_name(variant, seed)), started)
                     refresh()
                 elif not stopped:
-                    error = f"exit status {proc.returncode}: {_last_line(Path(log.name))}"
-                    failed.append(record_failure(out, variant, seed, error, Path(log.name)))
-                    progress.failed(variant, seed, error)
+                    error = f"exit status {code}: {_last_line(log)}"
+                    failed.append(record_failure(out, variant, seed, error, log))
+                    with lock:
+                        progress.failed(variant, seed, error)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..cli import add_overrides, non_negative_int, output_folder, positive_int
+from ..cli import add_accelerator, add_overrides, non_negative_int, output_folder, positive_int
 from ..config import load_config, resolve_preset
 from ..errors import PoseconsError
 
@@ -38,12 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--devices", type=positive_int, default=1, help="processes (one GPU each) per node")
     p.add_argument("--nodes", type=positive_int, default=1, help="machines taking part; each runs this command")
     p.add_argument("--rdzv-endpoint", help="HOST:PORT of the rendezvous for --nodes > 1")
-    p.add_argument(
-        "--accelerator",
-        choices=("auto", "cpu", "cuda"),
-        default="auto",
-        help="auto: CUDA when a GPU is visible, else the CPU",
-    )
+    add_accelerator(p)
     p.add_argument(
         "--precision",
         choices=("32", "bf16", "16", "auto"),

@@ -18,7 +18,7 @@ from ..data.gt import export_gt
 from ..data.splits import read_split
 from ..data.synth import generate_synth
 from ..evaluation import evaluate
-from ..evaluation.compare import checkpoint_note
+from ..evaluation.compare import checkpoint_note, result_cells, table1
 from ..fileio import write_json, write_text
 from ..plots import plot_scales_over_time, plot_validation
 from .trainer import save_initial_weights, train
@@ -118,11 +118,10 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
 def _report(s: dict, depth: dict, before: dict, stable: dict, pose: dict, seq: str, meta: dict) -> str:
     cv = pose["const_velocity"]
     m, t = s["config"]["model"], s["config"]["train"]
-    rows = "\n".join(
-        f"| {name} | {r['scale_cv']:.4f} | {r['abs_rel']:.3f} | {r['sq_rel']:.3f} | {r['rmse']:.3f} | "
-        f"{r['rmse_log']:.3f} | {r['a1']:.3f} | {r['a2']:.3f} | {r['a3']:.3f} |"
+    rows = [
+        [name, *result_cells(r, scale_format=".4f")]
         for name, r in (("untrained", before), ("trained (cyc)", depth), ("trained + `predict --stabilise`", stable))
-    )
+    ]
     return f"""# posecons demo report
 
 Synthetic KITTI-format data (seed {meta.get("seed")}, {len(meta.get("drives", []))} drives), ResNet-{m["num_layers"]}
@@ -133,10 +132,7 @@ Test: the held-out drives' `test_files.txt`, LiDAR ground truth, Garg crop, per-
 
 ## Depth (paper Table 1 layout)
 
-| model | σ/μ | abs rel | sq rel | rmse | rmse log | δ<1.25 | δ<1.25² | δ<1.25³ |
-|---|---|---|---|---|---|---|---|---|
-{rows}
-
+{table1(rows, ["model"])}
 abs rel falls by **{100 * s["abs_rel_improvement"]:.0f} %** from the untrained network.
 
 ![validation](plots/validation.png)

@@ -18,7 +18,7 @@ from ..data.datasets import build_dataset
 from ..data.gt import export_gt, load_gt
 from ..fileio import append_record, write_json
 from ..geometry import disp_to_depth
-from ..metrics.depth import evaluate_depth
+from ..metrics.depth import depth_metrics
 
 
 class Validator:
@@ -69,7 +69,7 @@ class Validator:
             folders += list(batch["folder"])
         metrics: dict[str, Any] = {"step": step, "val_photometric": sum(photometric) / len(self.indices)}
         if self.gt is not None:
-            result = evaluate_depth(np.concatenate(disps), self.gt, folders)
+            result = depth_metrics(np.concatenate(disps), self.gt, folders)
             metrics.update(
                 {
                     k: result[k]

@@ -1,4 +1,5 @@
-"""Small I/O helpers shared by the data layer: checked readers (writers are in :mod:`posecons.fileio`)."""
+"""Image files → RGB arrays at the network size: the one decode and the one resize of every frame
+(training data, the frame cache, evaluation and inference)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,7 @@ import numpy as np
 from PIL import Image
 
 from ..errors import PoseconsError
-
-
-def require_file(path: Path, what: str) -> Path:
-    """Return ``path`` if it is a file, else raise naming it and what it should have been."""
-    if not path.is_file():
-        raise PoseconsError(f"{path}: {what} not found")
-    return path
+from ..fileio import require_file
 
 
 def image_suffix(ext: str) -> str:
@@ -45,15 +40,6 @@ def load_rgb(
             return img.convert("RGB")
     except OSError as exc:
         raise PoseconsError(f"{path}: unreadable image ({exc})") from exc
-
-
-def load_velodyne(path: Path) -> np.ndarray:
-    """Read a KITTI Velodyne scan: (N, 4) float32 rows of x, y, z, reflectance."""
-    require_file(path, "Velodyne scan")
-    size = path.stat().st_size
-    if size % 16:
-        raise PoseconsError(f"{path}: size {size} bytes is not a multiple of 16 (4 float32 per point)")
-    return np.fromfile(path, dtype="<f4").reshape(-1, 4)
 
 
 RESIZE = "PIL bilinear (antialiased when shrinking) to uint8"  # what resize_uint8 does, for cache manifests
