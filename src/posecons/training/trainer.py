@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import datetime
 import math
 import os
 import random
@@ -40,7 +39,6 @@ import tempfile
 import threading
 import time
 import traceback
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -61,35 +59,9 @@ from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
 from ..fileio import keep_copy, remove_empty, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
+from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .init_from import load_initial_weights
 from .validation import Validator
-
-
-@dataclass
-class Dist:
-    rank: int = 0
-    world: int = 1
-    local_rank: int = 0
-
-    @property
-    def main(self) -> bool:
-        return self.rank == 0
-
-
-def init_distributed(accelerator: str) -> tuple[Dist, torch.device]:
-    """Join the process group torchrun describes (if any) and pick this process's device."""
-    env = Dist(
-        int(os.environ.get("RANK", 0)), int(os.environ.get("WORLD_SIZE", 1)), int(os.environ.get("LOCAL_RANK", 0))
-    )
-    use_cuda = accelerator == "cuda" or (accelerator == "auto" and torch.cuda.is_available())
-    if use_cuda and not torch.cuda.is_available():
-        raise PoseconsError("--accelerator cuda was asked for, but no CUDA device is visible")
-    device = torch.device("cuda", env.local_rank) if use_cuda else torch.device("cpu")
-    if use_cuda:
-        torch.cuda.set_device(device)
-    if env.world > 1 and not dist.is_initialized():
-        dist.init_process_group("nccl" if use_cuda else "gloo")
-    return env, device
 
 
 class StopRequest:
@@ -129,7 +101,6 @@ class StopRequest:
 
 
 RUN_LOCK = ".lock"
-VALIDATION_WAIT = datetime.timedelta(hours=2)  # how long the other ranks wait for the main rank's validation
 PREVIOUS = "last.prev.pt"  # the full state before last.pt
 CRASH_LOG = "crash.log"
 CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
@@ -231,15 +202,12 @@ class Trainer:
                 f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
                 "more data (`posecons synth` prints how many training lines it wrote)"
             )
-        # Validation (and its one-off ground-truth export) happens on the main rank only; the others
-        # wait for it in a group of their own, whose timeout is sized for a validation, not a step.
+        # Validation (and its one-off ground-truth export) happens on the main rank only; the others wait.
         validates = bool(val_file) and t.val_every != "off"
         self.validator = (
             Validator(config, data_path, val_file, self.out, self.device) if validates and self.env.main else None
         )
-        self._validation_wait = (
-            dist.new_group(backend="gloo", timeout=VALIDATION_WAIT) if validates and self.env.world > 1 else None
-        )
+        self._validation_wait = validation_group(self.env) if validates else None
         if t.best_metric == "abs_rel" and self.validator is not None and self.validator.gt is None:
             raise PoseconsError(
                 "train.best_metric=abs_rel selects best.pt by ground truth, but the validation split "
@@ -629,11 +597,9 @@ class Trainer:
             self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
 
     def validate(self) -> dict[str, Any]:
-        """Validate on the main rank while the other ranks wait at a barrier (a long validation would
-        otherwise reach the training collectives' timeout, NCCL's 10 minutes, in their next step)."""
+        """Validate on the main rank while the other ranks wait."""
         metrics = self._validate_here() if self.validator else {}
-        if self._validation_wait is not None:
-            dist.monitored_barrier(self._validation_wait, timeout=VALIDATION_WAIT)
+        wait_for_validation(self._validation_wait)
         return metrics
 
     def _validate_here(self) -> dict[str, Any]:
@@ -784,7 +750,7 @@ def train(
 ) -> dict[str, Any]:
     """Train a run and return a summary (steps, minutes, last validation metrics)."""
     out = Path(out)
-    main = int(os.environ.get("RANK", 0)) == 0
+    main = Dist.from_environment().main
     stop = StopRequest()
     with stop.installed():
         with _hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
@@ -798,7 +764,5 @@ def train(
                 raise
             if trainer.env.main:
                 write_json(out / "train_summary.json", summary)
-    if dist.is_initialized():
-        dist.barrier()
-        dist.destroy_process_group()
+    finish_distributed()
     return summary
