@@ -36,7 +36,6 @@ import shutil
 import signal
 import sys
 import tempfile
-import threading
 import time
 import traceback
 from pathlib import Path
@@ -61,44 +60,8 @@ from ..fileio import keep_copy, remove_empty, remove_temporaries, write_json, wr
 from ..model import PoseConsModel
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .init_from import load_initial_weights
+from .signals import StopRequest
 from .validation import Validator
-
-
-class StopRequest:
-    """SIGINT/SIGTERM during the training loop ask it to stop at the next step boundary, where the
-    state is consistent and a resume exact; before the loop, or a second time, they stop at once."""
-
-    def __init__(self) -> None:
-        self.signum = 0
-        self.in_loop = False
-        self.pid = os.getpid()
-
-    def _handle(self, signum: int, frame) -> None:
-        if os.getpid() != self.pid:  # a forked DataLoader worker: it keeps loading, the trainer decides
-            return
-        name = signal.Signals(signum).name
-        if self.in_loop and not self.signum:
-            self.signum = signum
-            print(f"\n{name}: stopping after this step (send it again to stop at once)", file=sys.stderr, flush=True)
-            return
-        raise Interrupted(f"stopped by {name}", signum)
-
-    @contextlib.contextmanager
-    def installed(self):
-        if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
-            yield self
-            return
-        previous = {
-            s: signal.signal(s, self._handle)
-            for s in (signal.SIGINT, signal.SIGTERM)
-            if signal.getsignal(s) is not signal.SIG_IGN
-        }  # e.g. SIGINT under nohup stays ignored
-        try:
-            yield self
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
-
 
 RUN_LOCK = ".lock"
 PREVIOUS = "last.prev.pt"  # the full state before last.pt
