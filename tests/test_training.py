@@ -17,7 +17,7 @@ from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
-from posecons.training import trainer as trainer_module
+from posecons.training import run_dir as run_dir_module
 from posecons.training.trainer import Trainer, collapse_signs, train
 from tiny import TINY_MODEL
 
@@ -202,7 +202,7 @@ def test_a_second_train_failing_on_a_new_folder_leaves_the_first_ones_files(synt
     sets = sum([["--set", s] for s in TINY], [])
     command = posecons_cmd("train", "--config", str(config), "--data-path", str(synth_data), "--out", str(run))
     command += ["--quiet", *sets]
-    real = trainer_module._writable_dir
+    real = run_dir_module._writable_dir
 
     def the_other_starts_first(out: Path):
         if not first:
@@ -212,7 +212,7 @@ def test_a_second_train_failing_on_a_new_folder_leaves_the_first_ones_files(synt
                 time.sleep(0.05)
         return real(out)
 
-    monkeypatch.setattr(trainer_module, "_writable_dir", the_other_starts_first)
+    monkeypatch.setattr(run_dir_module, "_writable_dir", the_other_starts_first)
     with pytest.raises(PoseconsError, match="another process is training this run"):
         train(tiny_config("train.max_steps=2", "train.val_every=off"), synth_data, run, quiet=True)
     assert first[0].wait(timeout=300) == 0 and (run / "config.yaml").is_file() and any((run / "tb").iterdir())
@@ -224,7 +224,7 @@ def test_the_writability_probe_leaves_another_processes_probe_alone(tmp_path):
     overwrites and removes while the first one probes."""
     theirs = tmp_path / ".write_test"
     theirs.write_text("theirs")
-    trainer_module._writable_dir(tmp_path)
+    run_dir_module._writable_dir(tmp_path)
     assert theirs.read_text() == "theirs" and sorted(tmp_path.iterdir()) == [theirs]
 
 

@@ -32,19 +32,15 @@ import copy
 import math
 import os
 import random
-import shutil
 import signal
 import sys
-import tempfile
 import time
-import traceback
 from pathlib import Path
 from typing import Any
 
 import torch
 import torch.distributed as dist
 import yaml
-from filelock import FileLock, Timeout
 from torch.nn.parallel import DistributedDataParallel
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import DataLoader
@@ -56,78 +52,15 @@ from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
-from ..fileio import keep_copy, remove_empty, remove_temporaries, write_json, write_text
+from ..fileio import keep_copy, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .init_from import load_initial_weights
+from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
 from .validation import Validator
 
-RUN_LOCK = ".lock"
 PREVIOUS = "last.prev.pt"  # the full state before last.pt
-CRASH_LOG = "crash.log"
-CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
-
-
-@contextlib.contextmanager
-def _hold_run_dir(out: Path):
-    """Hold ``out``'s lock while a process trains there: a second process on the same run directory
-    (two study sittings picking the same run, a repeated command) stops at once instead of writing
-    over the first one's checkpoints and logs. A folder that was new or empty when the lock was
-    taken holds only this process's files: a failure before the first checkpoint removes them
-    (yields whether it was)."""
-    created = _writable_dir(out)
-    lock = FileLock(out / RUN_LOCK, timeout=0)
-    try:
-        lock.acquire()
-    except Timeout:
-        raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
-    left = {p.name for p in out.iterdir()} - {RUN_LOCK}
-    fresh, discard = not left or (CRASH_LOG in left and left <= set(CRASH_RECORD)), False
-    if fresh:  # this attempt replaces the crash record of an earlier one
-        _remove_all_but(out, {RUN_LOCK})
-    try:
-        yield fresh
-    except BaseException:
-        discard = fresh and not (out / "checkpoints" / "last.pt").exists()
-        if discard:  # a run that crashed in training keeps its record; the lock goes last, while held
-            _remove_all_but(out, {RUN_LOCK, *(CRASH_RECORD if (out / CRASH_LOG).is_file() else ())})
-            (out / RUN_LOCK).unlink()
-        raise
-    finally:
-        lock.release()
-        if discard:
-            remove_empty(created)
-
-
-def run_in_progress(out: Path) -> bool:
-    """Whether another process is training in ``out`` now (holds its lock): a study skips that run."""
-    if not (out / RUN_LOCK).is_file():
-        return False
-    try:
-        with FileLock(out / RUN_LOCK, timeout=0):
-            return False
-    except Timeout:
-        return True
-
-
-def _writable_dir(out: Path) -> list[Path]:
-    """Make ``out`` if needed and return the folders made, outermost first; an unwritable one is an
-    error naming it."""
-    created = [p for p in [out, *out.parents] if not p.exists()][::-1]
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):  # a probe of its own: other processes may probe at once
-            pass
-    except OSError as exc:
-        raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
-    return created
-
-
-def _prepare_run_dir(out: Path, resume: bool) -> None:
-    _writable_dir(out)
-    if not resume and (out / "checkpoints" / "last.pt").exists():
-        raise PoseconsError(f"{out} already holds a run: pass --resume to continue it, or choose a new --out")
 
 
 class Trainer:
@@ -145,7 +78,7 @@ class Trainer:
         t = config.train
         self.env, self.device = init_distributed(accelerator)
         if self.env.main:
-            _prepare_run_dir(self.out, resume)
+            prepare_run_dir(self.out, resume)
         self.quiet = quiet or not self.env.main
         self.precision, why = resolve_precision(t.precision, self.device)
         if self.precision == "16" and self.device.type != "cuda":
@@ -668,35 +601,6 @@ def use_deterministic_algorithms(device: torch.device) -> None:
     torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
 
 
-def _remove_all_but(out: Path, keep: set[str]) -> None:
-    """Remove the entries of a run folder whose files are all posecons's own, but those named ``keep``."""
-    for entry in out.iterdir():
-        if entry.name in keep:
-            continue
-        if entry.is_dir() and not entry.is_symlink():
-            shutil.rmtree(entry)
-        else:
-            entry.unlink()
-
-
-def _write_crash_record(trainer: Trainer, exc: BaseException) -> None:
-    """``RUN/crash.log`` (the error and its traceback) beside the flushed ``RUN/tb/``: what stays of a
-    run that crashed before its first checkpoint, whose other files are removed."""
-    out = trainer.out
-    if trainer.writer:
-        trainer.writer.close()
-    error = "".join(traceback.format_exception_only(exc)).strip()
-    write_text(
-        out / CRASH_LOG,
-        f"training crashed at step {trainer.step}: {error}\n\n" + "".join(traceback.format_exception(exc)),
-    )
-    print(
-        f"{out}: the run crashed at step {trainer.step}, before its first checkpoint; the error is in "
-        f"{out / CRASH_LOG}, the TensorBoard log in {out / 'tb'}",
-        file=sys.stderr,
-    )
-
-
 def _as_tuple(value):
     """Python's RNG state comes back from the checkpoint with lists where it had tuples."""
     return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
@@ -716,14 +620,14 @@ def train(
     main = Dist.from_environment().main
     stop = StopRequest()
     with stop.installed():
-        with _hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
+        with hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
             trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
             trainer.stop = stop
             try:
                 summary = trainer.fit()
             except Exception as exc:  # bad input (one line, exit 2) and interrupts are no crash: no record
                 if fresh and not isinstance(exc, PoseconsError) and not (out / "checkpoints" / "last.pt").exists():
-                    _write_crash_record(trainer, exc)
+                    write_crash_record(out, trainer.step, exc, trainer.writer)
                 raise
             if trainer.env.main:
                 write_json(out / "train_summary.json", summary)
