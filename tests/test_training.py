@@ -348,7 +348,7 @@ def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, t
 
 
 def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
-    from posecons.training.trainer import resolve_precision
+    from posecons.training.precision import resolve_precision
 
     cpu = torch.device("cpu")
     assert resolve_precision("32", cpu) == ("32", "") and resolve_precision("bf16", cpu) == ("bf16", "")
@@ -368,7 +368,7 @@ def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
 
 
 def test_deterministic_mode_on_cuda_warns_instead_of_raising(monkeypatch):
-    from posecons.training.trainer import use_deterministic_algorithms
+    from posecons.training.precision import use_deterministic_algorithms
 
     monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
     before = torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled()

@@ -30,7 +30,6 @@ from __future__ import annotations
 import contextlib
 import copy
 import math
-import os
 import random
 import signal
 import sys
@@ -56,6 +55,7 @@ from ..fileio import keep_copy, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .init_from import load_initial_weights
+from .precision import autocast, resolve_precision, use_deterministic_algorithms
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
 from .validation import Validator
@@ -81,11 +81,6 @@ class Trainer:
             prepare_run_dir(self.out, resume)
         self.quiet = quiet or not self.env.main
         self.precision, why = resolve_precision(t.precision, self.device)
-        if self.precision == "16" and self.device.type != "cuda":
-            raise PoseconsError(
-                "train.precision=16 (float16 with a gradient scaler) needs a GPU; "
-                "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32"
-            )
         if t.deterministic:
             use_deterministic_algorithms(self.device)
 
@@ -302,10 +297,6 @@ class Trainer:
         self._train_loader.sampler.start(epoch, skip_batches * t.batch_size)
         return self._train_loader
 
-    def _autocast(self):
-        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.precision)
-        return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None)
-
     @property
     def _val_steps(self) -> int:
         """Steps between validations; 0 when validation is per epoch or off."""
@@ -417,7 +408,7 @@ class Trainer:
         sync = last or self.env.world == 1
         context = self.ddp.no_sync() if not sync and hasattr(self.ddp, "no_sync") else contextlib.nullcontext()
         with context:
-            with self._autocast():
+            with autocast(self.precision, self.device):
                 outputs, losses = self.ddp(batch, step=self.step)
             finite = torch.isfinite(losses["total"]).float()
             if self.env.world > 1:  # every rank must agree to skip, or DDP would hang
@@ -525,23 +516,6 @@ def collapse_signs(outputs: dict) -> dict[str, float]:
     }
 
 
-def resolve_precision(precision: str, device: torch.device) -> tuple[str, str]:
-    """``train.precision`` on ``device``: "auto" becomes "bf16" where the device computes bf16 natively
-    (a CUDA GPU that supports it; a CPU with AVX-512 BF16 or AMX, as torch reports) and "32" elsewhere,
-    where emulated bf16 would be slower than fp32. Returns (precision, why; why empty unless "auto")."""
-    if precision != "auto":
-        return precision, ""
-    if device.type == "cuda":
-        native = torch.cuda.is_bf16_supported()
-        where = f"{torch.cuda.get_device_name(device)} {'has' if native else 'lacks'} bf16"
-    else:
-        cpu = getattr(torch, "cpu", None)
-        checks = [getattr(cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
-        native = any(check() for check in checks if check is not None)
-        where = f"this CPU {'has' if native else 'lacks'} AVX-512 BF16 / AMX"
-    return ("bf16" if native else "32"), f"auto: {where}"
-
-
 def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
     """The network a run of ``config`` starts from. The RNGs are seeded with ``seed`` (default
     ``train.seed``) right before it is built, so nothing set up earlier (data, validation, a
@@ -588,17 +562,6 @@ def _without_imagenet(config):
         config.model.pretrained = False
         config.train.init_from = None
     return config
-
-
-def use_deterministic_algorithms(device: torch.device) -> None:
-    """Deterministic kernels for exact resume. On CUDA, cuBLAS needs a fixed workspace and some
-    backward kernels (grid_sample, reflection padding, bilinear interpolation) have no
-    deterministic version: PyTorch then warns instead of raising, and results can differ in
-    the last bits between runs."""
-    if device.type == "cuda":
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-        torch.backends.cudnn.benchmark = False
-    torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
 
 
 def _as_tuple(value):
