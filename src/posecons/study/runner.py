@@ -55,8 +55,9 @@ from ..data.synth.oracle import oracle_disparities
 from ..errors import Interrupted, PoseconsError
 from ..evaluation import evaluate
 from ..fileio import check_writable, make_dirs, write_json, write_text
+from ..training.initial_weights import save_initial_weights
 from ..training.run_dir import run_in_progress
-from ..training.trainer import save_initial_weights, train
+from ..training.trainer import train
 from .report import FAILED, STUDY_FILE, read_json, write_report
 from .spec import FLOOR, UNTRAINED, StudySpec
 

@@ -28,7 +28,6 @@ no bad input):
 from __future__ import annotations
 
 import contextlib
-import copy
 import math
 import random
 import signal
@@ -54,7 +53,7 @@ from ..errors import Interrupted, PoseconsError
 from ..fileio import keep_copy, remove_temporaries, write_json, write_text
 from ..model import PoseConsModel
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
-from .init_from import load_initial_weights
+from .initial_weights import initial_model, without_imagenet
 from .precision import autocast, resolve_precision, use_deterministic_algorithms
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
@@ -106,7 +105,7 @@ class Trainer:
             )
 
         # A resumed run takes its weights from last.pt: nothing is downloaded, so it also resumes offline.
-        model = initial_model(_without_imagenet(config) if resume else config, t.seed + self.env.rank).to(self.device)
+        model = initial_model(without_imagenet(config) if resume else config, t.seed + self.env.rank).to(self.device)
         if not resume:  # the run's config says what "auto" resolved to
             config.model.pretrained = model.initialisation.startswith("ImageNet")
         self.initialisation = model.initialisation
@@ -209,8 +208,8 @@ class Trainer:
                 "needs the checkpoints/last.pt that a run writes"
             )
         saved, requested = (
-            _without_imagenet(state["config"])["model"],
-            _without_imagenet(self.config.to_dict())["model"],
+            without_imagenet(state["config"])["model"],
+            without_imagenet(self.config.to_dict())["model"],
         )
         if saved != requested:
             raise PoseconsError(
@@ -516,52 +515,12 @@ def collapse_signs(outputs: dict) -> dict[str, float]:
     }
 
 
-def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
-    """The network a run of ``config`` starts from. The RNGs are seeded with ``seed`` (default
-    ``train.seed``) right before it is built, so nothing set up earlier (data, validation, a
-    variant's options) can shift the initial weights: every variant of a study with the same seed
-    starts from the same weights, and training continues the RNG streams from here. With
-    ``train.init_from`` the weights are that file's."""
-    seed = config.train.seed if seed is None else seed
-    random.seed(seed)
-    torch.manual_seed(seed)
-    if config.train.init_from is None:
-        return PoseConsModel(config)
-    model = PoseConsModel(_without_imagenet(config))  # the weights come from train.init_from
-    model.initialisation = load_initial_weights(model, config.train.init_from)
-    return model
-
-
-def save_initial_weights(path: str | Path, config: Config) -> None:
-    """The untrained network of ``config`` (:func:`initial_model`) as a weights checkpoint at step 0,
-    the reference row of an evaluation."""
-    config = copy.deepcopy(config)
-    model = initial_model(config)
-    config.model.pretrained = model.initialisation.startswith("ImageNet")  # what "auto" resolved to
-    save_checkpoint(
-        path,
-        {"config": config.to_dict(), "model": model.state_dict(), "step": 0, "initialisation": model.initialisation},
-    )
-
-
 def describe_selection(best_metric: str) -> str:
     """How best.pt is chosen, in words for logs and reports."""
     return {
         "val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
         "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)",
     }[best_metric]
-
-
-def _without_imagenet(config):
-    """A copy of a Config (or its dict) that builds the networks without fetching ImageNet weights
-    (or, a Config, reading train.init_from)."""
-    config = copy.deepcopy(config)
-    if isinstance(config, dict):
-        config["model"]["pretrained"] = False
-    else:
-        config.model.pretrained = False
-        config.train.init_from = None
-    return config
 
 
 def _as_tuple(value):
