@@ -58,6 +58,7 @@ from .precision import autocast, resolve_precision, use_deterministic_algorithms
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
 from .validation import Validator
+from .warmup import warmed_up, warmup_factor
 
 PREVIOUS = "last.prev.pt"  # the full state before last.pt
 
@@ -418,7 +419,7 @@ class Trainer:
             self.scaler.scale(losses["total"] / t.grad_accum).backward()
         if not last:
             return None, outputs
-        with self._warmup():
+        with warmed_up(self.optimizer, self.scheduler, warmup_factor(self.step + 1, t.warmup_steps)):
             self.scaler.step(self.optimizer)
         self.scaler.update()
         if self.ema is not None:  # AveragedModel's first update copies the weights, then ema ← d·ema + (1 − d)·w
@@ -426,31 +427,6 @@ class Trainer:
         self.optimizer.zero_grad(set_to_none=True)
         self.bad_steps = 0
         return {k: float(v.detach()) for k, v in losses.items()}, outputs
-
-    @contextlib.contextmanager
-    def _warmup(self):
-        """The learning rate × (step / train.warmup_steps) during the first steps, on top of the
-        epoch schedule, which sees (and saves) only its own rate. From scratch, Adam's first
-        updates are lr-sized on every weight at once: without warm-up the pose net's translation
-        grows fivefold in one step, far beyond the range where the photometric gradient tells
-        forward from backward (docs/lab/investigation.md §3)."""
-        factor = self._warmup_factor(self.step + 1)
-        if factor == 1.0:
-            yield
-            return
-        groups, rates = self.optimizer.param_groups, self.scheduler.get_last_lr()
-        for group, lr in zip(groups, rates):
-            group["lr"] = lr * factor
-        try:
-            yield
-        finally:
-            for group, lr in zip(groups, rates):
-                group["lr"] = lr
-
-    def _warmup_factor(self, step: int) -> float:
-        """The share of the scheduled learning rate that step ``step`` (counted from 1) uses."""
-        warmup = self.config.train.warmup_steps
-        return min(1.0, step / warmup) if warmup else 1.0
 
     def _skip_step(self) -> None:
         self.optimizer.zero_grad(set_to_none=True)
@@ -471,7 +447,7 @@ class Trainer:
         if self.step % t.log_every == 0 or self.step == 1:
             for k, v in losses.items():
                 self.writer.add_scalar(f"loss/{k}", v, self.step)
-            lr = self.optimizer.param_groups[0]["lr"] * self._warmup_factor(self.step)  # of the step just taken
+            lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, t.warmup_steps)  # the step just taken
             self.writer.add_scalar("lr", lr, self.step)
             for k, v in collapse_signs(outputs).items():
                 self.writer.add_scalar(f"mask/{k}", v, self.step)
