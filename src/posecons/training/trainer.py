@@ -504,22 +504,15 @@ def _as_tuple(value):
     return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
 
 
-def train(
-    config: Config,
-    data_path: str | Path,
-    out: str | Path,
-    split_dir: str | Path | None = None,
-    resume: bool = False,
-    accelerator: str = "auto",
-    quiet: bool = False,
-) -> dict[str, Any]:
-    """Train a run and return a summary (steps, minutes, last validation metrics)."""
+def train(config: Config, data_path: str | Path, out: str | Path, **options: Any) -> dict[str, Any]:
+    """Train a run and return a summary (steps, minutes, last validation metrics); ``options`` are
+    :class:`Trainer`'s (split_dir, resume, accelerator, quiet)."""
     out = Path(out)
     main = Dist.from_environment().main
     stop = StopRequest()
     with stop.installed():
         with hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
-            trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+            trainer = Trainer(config, data_path, out, **options)
             trainer.stop = stop
             try:
                 summary = trainer.fit()
