@@ -231,7 +231,7 @@ def test_the_writability_probe_leaves_another_processes_probe_alone(tmp_path):
 def test_resume_falls_back_to_the_previous_state_when_last_does_not_load(synth_data, tmp_path, capsys):
     """An empty last.pt (a machine that crashed as it was written): --resume says so in one line and
     continues from last.prev.pt, which then is last.pt again. Caught mutations: ``Trainer.save`` not
-    keeping the previous state; ``_newest_state`` without the fallback, or leaving the empty last.pt
+    keeping the previous state; ``state_to_resume`` without the fallback, or leaving the empty last.pt
     (the next save would keep it as last.prev.pt)."""
     run, sets = tmp_path / "run", ["train.val_every=off"]
     train(tiny_config("train.max_steps=2", "train.checkpoint_every=1", *sets), synth_data, run, quiet=True)

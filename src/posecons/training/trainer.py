@@ -29,9 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-import random
 import signal
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -44,23 +42,22 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
-from ..checkpoint import load_checkpoint, save_checkpoint
+from ..checkpoint import save_checkpoint
 from ..config import Config
 from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
-from ..fileio import keep_copy, remove_temporaries, write_json, write_text
+from ..fileio import keep_copy, write_json, write_text
 from ..model import PoseConsModel
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .initial_weights import initial_model, without_imagenet
 from .precision import autocast, resolve_precision, use_deterministic_algorithms
+from .resume import PREVIOUS, restore_training_state, state_to_resume, training_state
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
 from .validation import Validator
 from .warmup import warmed_up, warmup_factor
-
-PREVIOUS = "last.prev.pt"  # the full state before last.pt
 
 
 class Trainer:
@@ -135,9 +132,7 @@ class Trainer:
         self.session_start = time.time()
         self.stop = StopRequest()  # `train` installs it as the signal handler
         if resume:
-            if self.env.main:  # a checkpoint being written when the run was killed
-                remove_temporaries(self.out / "checkpoints")
-            self._load(*self._newest_state(self.out / "checkpoints"))
+            restore_training_state(self, *state_to_resume(self.out / "checkpoints", self.device, self.env.main))
         elif self.env.main:
             write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         if not self.quiet:
@@ -159,86 +154,6 @@ class Trainer:
         """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
         return self.ema.module if self.ema is not None else self.model
 
-    def state(self) -> dict[str, Any]:
-        ema = {"raw_model": self.model.state_dict(), "ema_updates": int(self.ema.n_averaged)} if self.ema else {}
-        return {
-            "config": self.config.to_dict(),
-            "model": self.eval_model.state_dict(),
-            **ema,
-            "weights": self.weights,
-            "optimizer": self.optimizer.state_dict(),
-            "scheduler": self.scheduler.state_dict(),
-            "scaler": self.scaler.state_dict(),
-            "step": self.step,
-            "epoch": self.epoch,
-            "batch_in_epoch": self.batch_in_epoch,
-            "bad_steps": self.bad_steps,
-            "skipped_steps": self.skipped_steps,
-            "best": self.best,
-            "initialisation": self.initialisation,
-            "train_seconds": self.seconds_before + time.time() - self.session_start,
-            "rng": {
-                "torch": torch.get_rng_state(),
-                "python": random.getstate(),
-                "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else [],
-            },
-        }
-
-    def _newest_state(self, folder: Path) -> tuple[Path, dict[str, Any]]:
-        """``last.pt`` and its state or, where it does not load (e.g. a crash of the machine as it
-        was written), the ``last.prev.pt`` it replaced, which then takes its place."""
-        last, previous = folder / "last.pt", folder / PREVIOUS
-        try:
-            return last, load_checkpoint(last, map_location=self.device)
-        except PoseconsError as exc:
-            if not previous.is_file():
-                raise
-            state = load_checkpoint(previous, map_location=self.device)
-            if self.env.main:
-                print(f"{exc}; resuming from {previous} (step {state.get('step')}) instead", file=sys.stderr)
-                keep_copy(previous, last)
-            return previous, state
-
-    def _load(self, path: Path, state: dict[str, Any]) -> None:
-        missing = [
-            k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng") if k not in state
-        ]
-        if missing:
-            raise PoseconsError(
-                f"{path}: holds no training state ({', '.join(missing)} missing); --resume "
-                "needs the checkpoints/last.pt that a run writes"
-            )
-        saved, requested = (
-            without_imagenet(state["config"])["model"],
-            without_imagenet(self.config.to_dict())["model"],
-        )
-        if saved != requested:
-            raise PoseconsError(
-                f"{path}: its model config {saved} differs from the requested "
-                f"{requested}; resume with the run's own config.yaml"
-            )
-        self.config.model.pretrained = state["config"]["model"]["pretrained"]
-        self.initialisation = state.get("initialisation", "not recorded (checkpoint predates the record)")
-        try:
-            self.model.load_state_dict(state.get("raw_model", state["model"]))
-            if self.ema is not None:  # "model" is the EMA, or the raw weights of a run without one (0 updates)
-                self.ema.module.load_state_dict(state["model"])
-                self.ema.n_averaged.fill_(state.get("ema_updates", 0))
-        except RuntimeError as exc:
-            raise PoseconsError(f"{path}: weights do not fit the model: {str(exc).splitlines()[0]}") from exc
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.scheduler.load_state_dict(state["scheduler"])
-        self.scaler.load_state_dict(state["scaler"])
-        for key in ("step", "epoch", "batch_in_epoch", "bad_steps", "skipped_steps"):
-            setattr(self, key, int(state[key]))
-        self.best = float(state["best"])
-        self.seconds_before = float(state.get("train_seconds", 0.0))  # absent in checkpoints of older versions
-        if self.env.world == 1:  # per-rank RNG streams are only saved for rank 0
-            torch.set_rng_state(state["rng"]["torch"].cpu())
-            random.setstate(_as_tuple(state["rng"]["python"]))
-            if self.device.type == "cuda" and state["rng"]["cuda"]:
-                torch.cuda.set_rng_state_all([s.cpu() for s in state["rng"]["cuda"]])
-
     def save(self) -> None:
         """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
         as ``last.prev.pt``, what a resume falls back to should the newest not load."""
@@ -246,7 +161,7 @@ class Trainer:
             last = self.out / "checkpoints" / "last.pt"
             if last.is_file():
                 keep_copy(last, last.with_name(PREVIOUS))
-            save_checkpoint(last, self.state())
+            save_checkpoint(last, training_state(self))
 
     def save_weights(self, name: str, selected_by: str | None = None) -> None:
         """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
@@ -497,11 +412,6 @@ def describe_selection(best_metric: str) -> str:
         "val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
         "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)",
     }[best_metric]
-
-
-def _as_tuple(value):
-    """Python's RNG state comes back from the checkpoint with lists where it had tuples."""
-    return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
 
 
 def train(config: Config, data_path: str | Path, out: str | Path, **options: Any) -> dict[str, Any]:
