@@ -18,7 +18,8 @@ from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
 from posecons.training import run_dir as run_dir_module
-from posecons.training.trainer import Trainer, collapse_signs, train
+from posecons.training.train_log import collapse_signs
+from posecons.training.trainer import Trainer, train
 from tiny import TINY_MODEL
 
 pytestmark = pytest.mark.slow

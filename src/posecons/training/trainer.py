@@ -56,7 +56,8 @@ from .precision import autocast, resolve_precision, use_deterministic_algorithms
 from .resume import PREVIOUS, restore_training_state, state_to_resume, training_state
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
-from .validation import Validator
+from .train_log import log_step, log_validation, open_log
+from .validation import Validator, describe_selection
 from .warmup import warmed_up, warmup_factor
 
 
@@ -142,11 +143,7 @@ class Trainer:
                 + f"; precision {self.precision}"
                 + (f" ({why})" if why else "")
             )
-        self.writer = None
-        if self.env.main:
-            from torch.utils.tensorboard import SummaryWriter
-
-            self.writer = SummaryWriter(self.out / "tb")
+        self.writer = open_log(self.out) if self.env.main else None
 
     # ------------------------------------------------------------------ state
     @property
@@ -357,21 +354,9 @@ class Trainer:
 
     def _log(self, losses: dict[str, float], batch: dict, outputs: dict) -> None:
         t = self.config.train
-        if not self.writer:
-            return
-        if self.step % t.log_every == 0 or self.step == 1:
-            for k, v in losses.items():
-                self.writer.add_scalar(f"loss/{k}", v, self.step)
+        if self.writer:
             lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, t.warmup_steps)  # the step just taken
-            self.writer.add_scalar("lr", lr, self.step)
-            for k, v in collapse_signs(outputs).items():
-                self.writer.add_scalar(f"mask/{k}", v, self.step)
-        if t.image_every and self.step % t.image_every == 0:
-            self.writer.add_image("input", batch["frames"][0, 0], self.step)
-            disp = outputs["disp"][0][0].detach().float()
-            # floored: a disparity collapsed to 0 everywhere shows black instead of NaN
-            self.writer.add_image("disparity", disp / disp.max().clamp_min(torch.finfo(disp.dtype).tiny), self.step)
-            self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
+            log_step(self.writer, t, self.step, losses, lr, batch, outputs)
 
     def validate(self) -> dict[str, Any]:
         """Validate on the main rank while the other ranks wait."""
@@ -386,32 +371,12 @@ class Trainer:
         if not metrics:
             return metrics
         if self.writer:
-            for k, v in metrics.items():
-                if isinstance(v, (int, float)) and math.isfinite(v):
-                    self.writer.add_scalar(f"val/{k}", v, self.step)
+            log_validation(self.writer, self.step, metrics)
         score = metrics[self.config.train.best_metric]
         if score < self.best:
             self.best = score
             self.save_weights("best.pt", selected_by=self.config.train.best_metric)
         return metrics
-
-
-def collapse_signs(outputs: dict) -> dict[str, float]:
-    """The two signs of a run collapsing from scratch (docs/lab/investigation.md §3), from the model's outputs:
-    the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the rest
-    from the loss), and the share of full-scale disparities pinned at the far end (sigmoid < 0.01)."""
-    return {
-        "warped_fraction": float(outputs["automask"].float().mean()),
-        "far_fraction": float((outputs["disp"][0].detach() < 0.01).float().mean()),
-    }
-
-
-def describe_selection(best_metric: str) -> str:
-    """How best.pt is chosen, in words for logs and reports."""
-    return {
-        "val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
-        "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)",
-    }[best_metric]
 
 
 def train(config: Config, data_path: str | Path, out: str | Path, **options: Any) -> dict[str, Any]:
