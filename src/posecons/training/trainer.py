@@ -14,15 +14,11 @@ that torchrun sets. The run directory holds everything of a run::
     RUN/metrics/step_NNNNNN.json and RUN/metrics.jsonl   one record per validation
 
 Resume is exact: the data order of an epoch is a pure function of (seed, epoch), augmentation
-draws of (seed, epoch, index), and the RNG states are saved, so an interrupted run that is
-resumed ends with the same weights as an uninterrupted one (in deterministic mode).
-
-SIGINT (Ctrl-C) or SIGTERM (what schedulers send before killing a job) stops the run at the next
-step boundary: ``last.pt`` is written and :class:`~posecons.errors.Interrupted` says how to resume.
-A second signal stops at once. A run that fails or is stopped before it saved any state leaves
-nothing behind in a run folder that was new or empty, but for a crash during training (an error that is
-no bad input):
-``RUN/crash.log`` (the error, its traceback) and ``RUN/tb/`` stay, until the next attempt there.
+draws of (seed, epoch, index), and the RNG states are saved (:mod:`.resume`), so an interrupted
+run that is resumed ends with the same weights as an uninterrupted one (in deterministic mode).
+SIGINT or SIGTERM stops the run at the next step boundary with ``last.pt`` written (:mod:`.signals`).
+A run that fails or is stopped before it saved any state leaves a new or empty run folder as it
+was, but for a crash in training (no bad input): ``RUN/crash.log`` and ``RUN/tb/`` stay (:mod:`.run_dir`).
 """
 
 from __future__ import annotations
@@ -62,6 +58,10 @@ from .warmup import warmed_up, warmup_factor
 
 
 class Trainer:
+    """One process's part of a run, in the order it happens: ``__init__`` sets up devices, data,
+    validation, model and optimiser (or restores a resumed run), :meth:`fit` runs the steps, with
+    validation and checkpoints at their intervals; :func:`train` wraps it in the run folder's lock."""
+
     def __init__(
         self,
         config: Config,
@@ -145,81 +145,7 @@ class Trainer:
             )
         self.writer = open_log(self.out) if self.env.main else None
 
-    # ------------------------------------------------------------------ state
-    @property
-    def eval_model(self) -> PoseConsModel:
-        """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
-        return self.ema.module if self.ema is not None else self.model
-
-    def save(self) -> None:
-        """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
-        as ``last.prev.pt``, what a resume falls back to should the newest not load."""
-        if self.env.main:
-            last = self.out / "checkpoints" / "last.pt"
-            if last.is_file():
-                keep_copy(last, last.with_name(PREVIOUS))
-            save_checkpoint(last, training_state(self))
-
-    def save_weights(self, name: str, selected_by: str | None = None) -> None:
-        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
-        ``selected_by`` says how a selected checkpoint (best.pt) was chosen."""
-        if self.env.main:
-            save_checkpoint(
-                self.out / "checkpoints" / name,
-                {
-                    "config": self.config.to_dict(),
-                    "model": self.eval_model.state_dict(),
-                    "weights": self.weights,
-                    "step": self.step,
-                    "epoch": self.epoch,
-                    "best": self.best,
-                    "selected_by": selected_by,
-                    "initialisation": self.initialisation,
-                },
-            )
-
-    def _save_epoch(self) -> None:
-        keep = self.config.train.keep_epochs
-        if keep == 0 or not self.env.main:
-            return
-        self.save_weights(f"epoch_{self.epoch:02d}.pt")
-        if keep > 0:
-            snapshots = sorted((self.out / "checkpoints").glob("epoch_*.pt"), key=lambda p: int(p.stem[6:]))
-            for old in snapshots[:-keep]:
-                old.unlink()
-
     # ------------------------------------------------------------------ loop
-    def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
-        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch). One loader
-        serves every epoch, so its workers persist; the sampler tells them the epoch."""
-        t = self.config.train
-        if self._train_loader is None:
-            workers = self.config.data.num_workers
-            self._train_loader = DataLoader(
-                self.train_set,
-                batch_size=t.batch_size,
-                sampler=EpochOrder(self.train_set, self.env.world, self.env.rank, t.seed),
-                drop_last=True,
-                num_workers=workers,
-                pin_memory=self.device.type == "cuda",
-                persistent_workers=workers > 0,
-                # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
-                generator=torch.Generator().manual_seed(t.seed),
-            )
-        self._train_loader.sampler.start(epoch, skip_batches * t.batch_size)
-        return self._train_loader
-
-    @property
-    def _val_steps(self) -> int:
-        """Steps between validations; 0 when validation is per epoch or off."""
-        every = self.config.train.val_every
-        return every if isinstance(every, int) else 0
-
-    def total_steps(self) -> int:
-        t = self.config.train
-        full = self.steps_per_epoch * t.epochs
-        return min(full, t.max_steps) if t.max_steps else full
-
     def fit(self) -> dict[str, Any]:
         total = self.total_steps()
         bar = tqdm(total=total, initial=self.step, disable=self.quiet, dynamic_ncols=True, unit="step")
@@ -255,23 +181,10 @@ class Trainer:
             self.writer.close()
         return summary
 
-    def _stop_requested(self) -> bool:
-        """True once a signal asked to stop; every rank must agree, or the others would wait forever."""
-        if self.env.world == 1:
-            return bool(self.stop.signum)
-        flag = torch.tensor([self.stop.signum], device=self.device)
-        dist.all_reduce(flag, op=dist.ReduceOp.MAX)
-        self.stop.signum = int(flag.item())
-        return bool(self.stop.signum)
-
-    def _stop_now(self) -> None:
-        self.save()
-        name = signal.Signals(self.stop.signum).name
-        raise Interrupted(
-            f"stopped by {name} at step {self.step}; the state is saved in "
-            f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
-            self.stop.signum,
-        )
+    def total_steps(self) -> int:
+        t = self.config.train
+        full = self.steps_per_epoch * t.epochs
+        return min(full, t.max_steps) if t.max_steps else full
 
     def _loop(self, total: int, bar) -> dict[str, Any]:
         """The epochs and steps from the current position to ``total``; returns the last validation."""
@@ -306,6 +219,32 @@ class Trainer:
                 self._save_epoch()
             self.save()
         return last_metrics
+
+    @property
+    def _val_steps(self) -> int:
+        """Steps between validations; 0 when validation is per epoch or off."""
+        every = self.config.train.val_every
+        return every if isinstance(every, int) else 0
+
+    def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
+        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch). One loader
+        serves every epoch, so its workers persist; the sampler tells them the epoch."""
+        t = self.config.train
+        if self._train_loader is None:
+            workers = self.config.data.num_workers
+            self._train_loader = DataLoader(
+                self.train_set,
+                batch_size=t.batch_size,
+                sampler=EpochOrder(self.train_set, self.env.world, self.env.rank, t.seed),
+                drop_last=True,
+                num_workers=workers,
+                pin_memory=self.device.type == "cuda",
+                persistent_workers=workers > 0,
+                # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
+                generator=torch.Generator().manual_seed(t.seed),
+            )
+        self._train_loader.sampler.start(epoch, skip_batches * t.batch_size)
+        return self._train_loader
 
     def _micro_step(self, batch: dict, last: bool) -> tuple[dict[str, float] | None, dict]:
         """Forward/backward of one micro-batch; the optimiser steps on the last of ``grad_accum``.
@@ -353,11 +292,28 @@ class Trainer:
             )
 
     def _log(self, losses: dict[str, float], batch: dict, outputs: dict) -> None:
-        t = self.config.train
-        if self.writer:
-            lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, t.warmup_steps)  # the step just taken
-            log_step(self.writer, t, self.step, losses, lr, batch, outputs)
+        if self.writer:  # the rate that the step just taken used, warm-up included
+            lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, self.config.train.warmup_steps)
+            log_step(self.writer, self.config.train, self.step, losses, lr, batch, outputs)
 
+    def _stop_requested(self) -> bool:
+        """True once a signal asked to stop; every rank must agree, or the others would wait forever."""
+        if self.env.world > 1:
+            flag = torch.tensor([self.stop.signum], device=self.device)
+            dist.all_reduce(flag, op=dist.ReduceOp.MAX)
+            self.stop.signum = int(flag.item())
+        return bool(self.stop.signum)
+
+    def _stop_now(self) -> None:
+        self.save()
+        name = signal.Signals(self.stop.signum).name
+        raise Interrupted(
+            f"stopped by {name} at step {self.step}; the state is saved in "
+            f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
+            self.stop.signum,
+        )
+
+    # ------------------------------------------------------------------ validation
     def validate(self) -> dict[str, Any]:
         """Validate on the main rank while the other ranks wait."""
         metrics = self._validate_here() if self.validator else {}
@@ -377,6 +333,49 @@ class Trainer:
             self.best = score
             self.save_weights("best.pt", selected_by=self.config.train.best_metric)
         return metrics
+
+    # ------------------------------------------------------------------ checkpoints
+    @property
+    def eval_model(self) -> PoseConsModel:
+        """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
+        return self.ema.module if self.ema is not None else self.model
+
+    def save(self) -> None:
+        """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
+        as ``last.prev.pt``, what a resume falls back to should the newest not load."""
+        if self.env.main:
+            last = self.out / "checkpoints" / "last.pt"
+            if last.is_file():
+                keep_copy(last, last.with_name(PREVIOUS))
+            save_checkpoint(last, training_state(self))
+
+    def save_weights(self, name: str, selected_by: str | None = None) -> None:
+        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
+        ``selected_by`` says how a selected checkpoint (best.pt) was chosen."""
+        if self.env.main:
+            save_checkpoint(
+                self.out / "checkpoints" / name,
+                {
+                    "config": self.config.to_dict(),
+                    "model": self.eval_model.state_dict(),
+                    "weights": self.weights,
+                    "step": self.step,
+                    "epoch": self.epoch,
+                    "best": self.best,
+                    "selected_by": selected_by,
+                    "initialisation": self.initialisation,
+                },
+            )
+
+    def _save_epoch(self) -> None:
+        keep = self.config.train.keep_epochs
+        if keep == 0 or not self.env.main:
+            return
+        self.save_weights(f"epoch_{self.epoch:02d}.pt")
+        if keep > 0:
+            snapshots = sorted((self.out / "checkpoints").glob("epoch_*.pt"), key=lambda p: int(p.stem[6:]))
+            for old in snapshots[:-keep]:
+                old.unlink()
 
 
 def train(config: Config, data_path: str | Path, out: str | Path, **options: Any) -> dict[str, Any]:
