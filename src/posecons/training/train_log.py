@@ -1,5 +1,5 @@
-"""The run's TensorBoard log, ``RUN/tb/``, which the main rank writes: every ``train.log_every``
-steps the losses, the learning rate of the step and the two signs of a collapse
+"""The run's TensorBoard log, ``RUN/tb/``, which the main rank writes: at step 1 and every
+``train.log_every`` steps the losses, the learning rate of the step and the two signs of a collapse
 (:func:`collapse_signs`); every ``train.image_every`` steps an input frame, its disparity and
 auto-mask; after each validation its finite metrics. Kept apart from the trainer, which says when
 to log and not how, and so that only the main rank imports TensorBoard."""
@@ -41,6 +41,7 @@ def log_step(
 
 
 def log_validation(writer, step: int, metrics: dict[str, Any]) -> None:
+    """The validation ``metrics`` of ``step`` that are finite numbers."""
     for k, v in metrics.items():
         if isinstance(v, (int, float)) and math.isfinite(v):
             writer.add_scalar(f"val/{k}", v, step)
