@@ -25,7 +25,7 @@ from torch.utils.flop_counter import FlopCounterMode
 from posecons.checkpoint import load_model
 from posecons.config import load_config
 from posecons.inference.export import export_model
-from posecons.training.trainer import save_initial_weights
+from posecons.training.initial_weights import save_initial_weights
 
 
 def _median_seconds(run, warmup: int, repeats: int, device: torch.device) -> float:

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from posecons.training.demo import run_demo
-from posecons.training.trainer import resolve_precision
+from posecons.training.precision import resolve_precision
 
 pytestmark = pytest.mark.slow
 

@@ -12,7 +12,8 @@ from posecons.cli import main
 from posecons.config import load_config
 from posecons.errors import PoseconsError
 from posecons.model import PoseConsModel
-from posecons.training.trainer import initial_model, train
+from posecons.training.initial_weights import initial_model
+from posecons.training.trainer import train
 from tiny import TINY_MODEL
 
 pytestmark = pytest.mark.slow

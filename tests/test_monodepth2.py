@@ -135,7 +135,7 @@ def test_a_stereo_model_imports_its_depth_network_and_says_so(tmp_path, capsys):
 def test_a_monodepth2_folder_is_a_start_for_training(tmp_path):
     """``train --init-from FOLDER``. Catches: a folder not read as a Monodepth2 model, its
     architecture not compared with the run's."""
-    from posecons.training.trainer import initial_model
+    from posecons.training.initial_weights import initial_model
 
     model = random_model()
     to_monodepth2(model, tmp_path / "md2")

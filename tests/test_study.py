@@ -21,7 +21,8 @@ from posecons.config import STUDY_SPECS, load_config, preset_names, resolve_pres
 from posecons.errors import PoseconsError
 from posecons.study import report, runner
 from posecons.study.spec import load_spec
-from posecons.training.trainer import Trainer, save_initial_weights
+from posecons.training.initial_weights import save_initial_weights
+from posecons.training.trainer import Trainer
 
 SYNTH = {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}
 TINY = ["model.width=128", "train.max_steps=3", "train.batch_size=2", "train.val_every=off"]

@@ -17,8 +17,9 @@ from posecons.checkpoint import describe_checkpoint, load_checkpoint, load_model
 from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
-from posecons.training import trainer as trainer_module
-from posecons.training.trainer import Trainer, collapse_signs, train
+from posecons.training import run_dir as run_dir_module
+from posecons.training.train_log import collapse_signs
+from posecons.training.trainer import Trainer, train
 from tiny import TINY_MODEL
 
 pytestmark = pytest.mark.slow
@@ -202,7 +203,7 @@ def test_a_second_train_failing_on_a_new_folder_leaves_the_first_ones_files(synt
     sets = sum([["--set", s] for s in TINY], [])
     command = posecons_cmd("train", "--config", str(config), "--data-path", str(synth_data), "--out", str(run))
     command += ["--quiet", *sets]
-    real = trainer_module._writable_dir
+    real = run_dir_module._writable_dir
 
     def the_other_starts_first(out: Path):
         if not first:
@@ -212,7 +213,7 @@ def test_a_second_train_failing_on_a_new_folder_leaves_the_first_ones_files(synt
                 time.sleep(0.05)
         return real(out)
 
-    monkeypatch.setattr(trainer_module, "_writable_dir", the_other_starts_first)
+    monkeypatch.setattr(run_dir_module, "_writable_dir", the_other_starts_first)
     with pytest.raises(PoseconsError, match="another process is training this run"):
         train(tiny_config("train.max_steps=2", "train.val_every=off"), synth_data, run, quiet=True)
     assert first[0].wait(timeout=300) == 0 and (run / "config.yaml").is_file() and any((run / "tb").iterdir())
@@ -224,14 +225,14 @@ def test_the_writability_probe_leaves_another_processes_probe_alone(tmp_path):
     overwrites and removes while the first one probes."""
     theirs = tmp_path / ".write_test"
     theirs.write_text("theirs")
-    trainer_module._writable_dir(tmp_path)
+    run_dir_module._writable_dir(tmp_path)
     assert theirs.read_text() == "theirs" and sorted(tmp_path.iterdir()) == [theirs]
 
 
 def test_resume_falls_back_to_the_previous_state_when_last_does_not_load(synth_data, tmp_path, capsys):
     """An empty last.pt (a machine that crashed as it was written): --resume says so in one line and
     continues from last.prev.pt, which then is last.pt again. Caught mutations: ``Trainer.save`` not
-    keeping the previous state; ``_newest_state`` without the fallback, or leaving the empty last.pt
+    keeping the previous state; ``state_to_resume`` without the fallback, or leaving the empty last.pt
     (the next save would keep it as last.prev.pt)."""
     run, sets = tmp_path / "run", ["train.val_every=off"]
     train(tiny_config("train.max_steps=2", "train.checkpoint_every=1", *sets), synth_data, run, quiet=True)
@@ -348,7 +349,7 @@ def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, t
 
 
 def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
-    from posecons.training.trainer import resolve_precision
+    from posecons.training.precision import resolve_precision
 
     cpu = torch.device("cpu")
     assert resolve_precision("32", cpu) == ("32", "") and resolve_precision("bf16", cpu) == ("bf16", "")
@@ -368,7 +369,7 @@ def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
 
 
 def test_deterministic_mode_on_cuda_warns_instead_of_raising(monkeypatch):
-    from posecons.training.trainer import use_deterministic_algorithms
+    from posecons.training.precision import use_deterministic_algorithms
 
     monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
     before = torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled()

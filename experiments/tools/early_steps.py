@@ -16,7 +16,8 @@ from pathlib import Path
 
 from posecons.cli import add_overrides
 from posecons.config import load_config, resolve_preset
-from posecons.training.trainer import Trainer, collapse_signs
+from posecons.training.train_log import collapse_signs
+from posecons.training.trainer import Trainer
 
 
 def main() -> None:

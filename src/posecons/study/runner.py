@@ -57,7 +57,9 @@ from ..errors import Interrupted, PoseconsError
 from ..evaluation import evaluate
 from ..fileio import check_writable, make_dirs, write_json, write_text
 from ..inference.backend import Predictor, load_predictor
-from ..training.trainer import run_in_progress, save_initial_weights, train
+from ..training.initial_weights import save_initial_weights
+from ..training.run_dir import run_in_progress
+from ..training.trainer import train
 from .report import FAILED, STUDY_FILE, read_json, write_report
 from .spec import FLOOR, UNTRAINED, StudySpec
 

@@ -97,7 +97,15 @@ def train_command(args: argparse.Namespace) -> int:
         return _launch_torchrun(args)
     from .trainer import train
 
-    summary = train(config, args.data_path, args.out, args.split_dir, args.resume, args.accelerator, args.quiet)
+    summary = train(
+        config,
+        args.data_path,
+        args.out,
+        split_dir=args.split_dir,
+        resume=args.resume,
+        accelerator=args.accelerator,
+        quiet=args.quiet,
+    )
     if int(os.environ.get("RANK", 0)) == 0:
         print(f"trained {summary['steps']} steps in {summary['minutes']:.1f} min → {args.out}")
     return 0

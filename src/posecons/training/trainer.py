@@ -14,189 +14,54 @@ that torchrun sets. The run directory holds everything of a run::
     RUN/metrics/step_NNNNNN.json and RUN/metrics.jsonl   one record per validation
 
 Resume is exact: the data order of an epoch is a pure function of (seed, epoch), augmentation
-draws of (seed, epoch, index), and the RNG states are saved, so an interrupted run that is
-resumed ends with the same weights as an uninterrupted one (in deterministic mode).
-
-SIGINT (Ctrl-C) or SIGTERM (what schedulers send before killing a job) stops the run at the next
-step boundary: ``last.pt`` is written and :class:`~posecons.errors.Interrupted` says how to resume.
-A second signal stops at once. A run that fails or is stopped before it saved any state leaves
-nothing behind in a run folder that was new or empty, but for a crash during training (an error that is
-no bad input):
-``RUN/crash.log`` (the error, its traceback) and ``RUN/tb/`` stay, until the next attempt there.
+draws of (seed, epoch, index), and the RNG states are saved (:mod:`.resume`), so an interrupted
+run that is resumed ends with the same weights as an uninterrupted one (in deterministic mode).
+SIGINT or SIGTERM stops the run at the next step boundary with ``last.pt`` written (:mod:`.signals`).
+A run that fails or is stopped before it saved any state leaves a new or empty run folder as it
+was, but for a crash in training (no bad input): ``RUN/crash.log`` and ``RUN/tb/`` stay (:mod:`.run_dir`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import copy
-import datetime
 import math
-import os
-import random
-import shutil
 import signal
-import sys
-import tempfile
-import threading
 import time
-import traceback
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 import torch.distributed as dist
 import yaml
-from filelock import FileLock, Timeout
 from torch.nn.parallel import DistributedDataParallel
 from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
-from ..checkpoint import load_checkpoint, save_checkpoint
-from ..config import Config, without_retired
+from ..checkpoint import save_checkpoint
+from ..config import Config
 from ..data.augment import jitter_batch
 from ..data.datasets import build_dataset, split_files
 from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
-from ..fileio import keep_copy, remove_empty, remove_temporaries, write_json, write_text
+from ..fileio import keep_copy, write_json, write_text
 from ..model import PoseConsModel
-from .init_from import load_initial_weights
-from .validation import Validator
-
-
-@dataclass
-class Dist:
-    rank: int = 0
-    world: int = 1
-    local_rank: int = 0
-
-    @property
-    def main(self) -> bool:
-        return self.rank == 0
-
-
-def init_distributed(accelerator: str) -> tuple[Dist, torch.device]:
-    """Join the process group torchrun describes (if any) and pick this process's device."""
-    env = Dist(
-        int(os.environ.get("RANK", 0)), int(os.environ.get("WORLD_SIZE", 1)), int(os.environ.get("LOCAL_RANK", 0))
-    )
-    use_cuda = accelerator == "cuda" or (accelerator == "auto" and torch.cuda.is_available())
-    if use_cuda and not torch.cuda.is_available():
-        raise PoseconsError("--accelerator cuda was asked for, but no CUDA device is visible")
-    device = torch.device("cuda", env.local_rank) if use_cuda else torch.device("cpu")
-    if use_cuda:
-        torch.cuda.set_device(device)
-    if env.world > 1 and not dist.is_initialized():
-        dist.init_process_group("nccl" if use_cuda else "gloo")
-    return env, device
-
-
-class StopRequest:
-    """SIGINT/SIGTERM during the training loop ask it to stop at the next step boundary, where the
-    state is consistent and a resume exact; before the loop, or a second time, they stop at once."""
-
-    def __init__(self) -> None:
-        self.signum = 0
-        self.in_loop = False
-        self.pid = os.getpid()
-
-    def _handle(self, signum: int, frame) -> None:
-        if os.getpid() != self.pid:  # a forked DataLoader worker: it keeps loading, the trainer decides
-            return
-        name = signal.Signals(signum).name
-        if self.in_loop and not self.signum:
-            self.signum = signum
-            print(f"\n{name}: stopping after this step (send it again to stop at once)", file=sys.stderr, flush=True)
-            return
-        raise Interrupted(f"stopped by {name}", signum)
-
-    @contextlib.contextmanager
-    def installed(self):
-        if threading.current_thread() is not threading.main_thread():  # signals reach the main thread only
-            yield self
-            return
-        previous = {
-            s: signal.signal(s, self._handle)
-            for s in (signal.SIGINT, signal.SIGTERM)
-            if signal.getsignal(s) is not signal.SIG_IGN
-        }  # e.g. SIGINT under nohup stays ignored
-        try:
-            yield self
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
-
-
-RUN_LOCK = ".lock"
-VALIDATION_WAIT = datetime.timedelta(hours=2)  # how long the other ranks wait for the main rank's validation
-PREVIOUS = "last.prev.pt"  # the full state before last.pt
-CRASH_LOG = "crash.log"
-CRASH_RECORD = (CRASH_LOG, "tb")  # what a run that crashed before its first checkpoint leaves
-
-
-@contextlib.contextmanager
-def _hold_run_dir(out: Path):
-    """Hold ``out``'s lock while a process trains there: a second process on the same run directory
-    (two study sittings picking the same run, a repeated command) stops at once instead of writing
-    over the first one's checkpoints and logs. A folder that was new or empty when the lock was
-    taken holds only this process's files: a failure before the first checkpoint removes them
-    (yields whether it was)."""
-    created = _writable_dir(out)
-    lock = FileLock(out / RUN_LOCK, timeout=0)
-    try:
-        lock.acquire()
-    except Timeout:
-        raise PoseconsError(f"{out}: another process is training this run; wait for it or stop it") from None
-    left = {p.name for p in out.iterdir()} - {RUN_LOCK}
-    fresh, discard = not left or (CRASH_LOG in left and left <= set(CRASH_RECORD)), False
-    if fresh:  # this attempt replaces the crash record of an earlier one
-        _remove_all_but(out, {RUN_LOCK})
-    try:
-        yield fresh
-    except BaseException:
-        discard = fresh and not (out / "checkpoints" / "last.pt").exists()
-        if discard:  # a run that crashed in training keeps its record; the lock goes last, while held
-            _remove_all_but(out, {RUN_LOCK, *(CRASH_RECORD if (out / CRASH_LOG).is_file() else ())})
-            (out / RUN_LOCK).unlink()
-        raise
-    finally:
-        lock.release()
-        if discard:
-            remove_empty(created)
-
-
-def run_in_progress(out: Path) -> bool:
-    """Whether another process is training in ``out`` now (holds its lock): a study skips that run."""
-    if not (out / RUN_LOCK).is_file():
-        return False
-    try:
-        with FileLock(out / RUN_LOCK, timeout=0):
-            return False
-    except Timeout:
-        return True
-
-
-def _writable_dir(out: Path) -> list[Path]:
-    """Make ``out`` if needed and return the folders made, outermost first; an unwritable one is an
-    error naming it."""
-    created = [p for p in [out, *out.parents] if not p.exists()][::-1]
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):  # a probe of its own: other processes may probe at once
-            pass
-    except OSError as exc:
-        raise PoseconsError(f"run directory {out} is not writable: {exc.strerror}") from exc
-    return created
-
-
-def _prepare_run_dir(out: Path, resume: bool) -> None:
-    _writable_dir(out)
-    if not resume and (out / "checkpoints" / "last.pt").exists():
-        raise PoseconsError(f"{out} already holds a run: pass --resume to continue it, or choose a new --out")
+from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
+from .initial_weights import initial_model, without_imagenet
+from .precision import autocast, resolve_precision, use_deterministic_algorithms
+from .resume import PREVIOUS, restore_training_state, state_to_resume, training_state
+from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
+from .signals import StopRequest
+from .train_log import log_step, log_validation, open_log
+from .validation import Validator, describe_selection
+from .warmup import warmed_up, warmup_factor
 
 
 class Trainer:
+    """One process's part of a run, in the order it happens: ``__init__`` sets up devices, data,
+    validation, model and optimiser (or restores a resumed run), :meth:`fit` runs the steps, with
+    validation and checkpoints at their intervals; :func:`train` wraps it in the run folder's lock."""
+
     def __init__(
         self,
         config: Config,
@@ -211,14 +76,9 @@ class Trainer:
         t = config.train
         self.env, self.device = init_distributed(accelerator)
         if self.env.main:
-            _prepare_run_dir(self.out, resume)
+            prepare_run_dir(self.out, resume)
         self.quiet = quiet or not self.env.main
         self.precision, why = resolve_precision(t.precision, self.device)
-        if self.precision == "16" and self.device.type != "cuda":
-            raise PoseconsError(
-                "train.precision=16 (float16 with a gradient scaler) needs a GPU; "
-                "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32"
-            )
         if t.deterministic:
             use_deterministic_algorithms(self.device)
 
@@ -231,15 +91,12 @@ class Trainer:
                 f"({t.batch_size} × {self.env.world} processes): lower train.batch_size or use "
                 "more data (`posecons synth` prints how many training lines it wrote)"
             )
-        # Validation (and its one-off ground-truth export) happens on the main rank only; the others
-        # wait for it in a group of their own, whose timeout is sized for a validation, not a step.
+        # Validation (and its one-off ground-truth export) happens on the main rank only; the others wait.
         validates = bool(val_file) and t.val_every != "off"
         self.validator = (
             Validator(config, data_path, val_file, self.out, self.device) if validates and self.env.main else None
         )
-        self._validation_wait = (
-            dist.new_group(backend="gloo", timeout=VALIDATION_WAIT) if validates and self.env.world > 1 else None
-        )
+        self._validation_wait = validation_group(self.env) if validates else None
         if t.best_metric == "abs_rel" and self.validator is not None and self.validator.gt is None:
             raise PoseconsError(
                 "train.best_metric=abs_rel selects best.pt by ground truth, but the validation split "
@@ -247,7 +104,7 @@ class Trainer:
             )
 
         # A resumed run takes its weights from last.pt: nothing is downloaded, so it also resumes offline.
-        model = initial_model(_without_imagenet(config) if resume else config, t.seed + self.env.rank).to(self.device)
+        model = initial_model(without_imagenet(config) if resume else config, t.seed + self.env.rank).to(self.device)
         if not resume:  # the run's config says what "auto" resolved to
             config.model.pretrained = model.initialisation.startswith("ImageNet")
         self.initialisation = model.initialisation
@@ -276,9 +133,7 @@ class Trainer:
         self.session_start = time.time()
         self.stop = StopRequest()  # `train` installs it as the signal handler
         if resume:
-            if self.env.main:  # a checkpoint being written when the run was killed
-                remove_temporaries(self.out / "checkpoints")
-            self._load(*self._newest_state(self.out / "checkpoints"))
+            restore_training_state(self, *state_to_resume(self.out / "checkpoints", self.device, self.env.main))
         elif self.env.main:
             write_text(self.out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False))
         if not self.quiet:
@@ -288,171 +143,9 @@ class Trainer:
                 + f"; precision {self.precision}"
                 + (f" ({why})" if why else "")
             )
-        self.writer = None
-        if self.env.main:
-            from torch.utils.tensorboard import SummaryWriter
-
-            self.writer = SummaryWriter(self.out / "tb")
-
-    # ------------------------------------------------------------------ state
-    @property
-    def eval_model(self) -> PoseConsModel:
-        """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
-        return self.ema.module if self.ema is not None else self.model
-
-    def state(self) -> dict[str, Any]:
-        ema = {"raw_model": self.model.state_dict(), "ema_updates": int(self.ema.n_averaged)} if self.ema else {}
-        return {
-            "config": self.config.to_dict(),
-            "model": self.eval_model.state_dict(),
-            **ema,
-            "weights": self.weights,
-            "optimizer": self.optimizer.state_dict(),
-            "scheduler": self.scheduler.state_dict(),
-            "scaler": self.scaler.state_dict(),
-            "step": self.step,
-            "epoch": self.epoch,
-            "batch_in_epoch": self.batch_in_epoch,
-            "bad_steps": self.bad_steps,
-            "skipped_steps": self.skipped_steps,
-            "best": self.best,
-            "initialisation": self.initialisation,
-            "train_seconds": self.seconds_before + time.time() - self.session_start,
-            "rng": {
-                "torch": torch.get_rng_state(),
-                "python": random.getstate(),
-                "cuda": torch.cuda.get_rng_state_all() if self.device.type == "cuda" else [],
-            },
-        }
-
-    def _newest_state(self, folder: Path) -> tuple[Path, dict[str, Any]]:
-        """``last.pt`` and its state or, where it does not load (e.g. a crash of the machine as it
-        was written), the ``last.prev.pt`` it replaced, which then takes its place."""
-        last, previous = folder / "last.pt", folder / PREVIOUS
-        try:
-            return last, load_checkpoint(last, map_location=self.device)
-        except PoseconsError as exc:
-            if not previous.is_file():
-                raise
-            state = load_checkpoint(previous, map_location=self.device)
-            if self.env.main:
-                print(f"{exc}; resuming from {previous} (step {state.get('step')}) instead", file=sys.stderr)
-                keep_copy(previous, last)
-            return previous, state
-
-    def _load(self, path: Path, state: dict[str, Any]) -> None:
-        missing = [
-            k for k in ("optimizer", "scheduler", "scaler", "step", "epoch", "batch_in_epoch", "rng") if k not in state
-        ]
-        if missing:
-            raise PoseconsError(
-                f"{path}: holds no training state ({', '.join(missing)} missing); --resume "
-                "needs the checkpoints/last.pt that a run writes"
-            )
-        saved, requested = (
-            _without_imagenet(without_retired(state["config"]))["model"],  # a run from before a removal resumes
-            _without_imagenet(self.config.to_dict())["model"],
-        )
-        if saved != requested:
-            raise PoseconsError(
-                f"{path}: its model config {saved} differs from the requested "
-                f"{requested}; resume with the run's own config.yaml"
-            )
-        self.config.model.pretrained = state["config"]["model"]["pretrained"]
-        self.initialisation = state.get("initialisation", "not recorded (checkpoint predates the record)")
-        try:
-            self.model.load_state_dict(state.get("raw_model", state["model"]))
-            if self.ema is not None:  # "model" is the EMA, or the raw weights of a run without one (0 updates)
-                self.ema.module.load_state_dict(state["model"])
-                self.ema.n_averaged.fill_(state.get("ema_updates", 0))
-        except RuntimeError as exc:
-            raise PoseconsError(f"{path}: weights do not fit the model: {str(exc).splitlines()[0]}") from exc
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.scheduler.load_state_dict(state["scheduler"])
-        self.scaler.load_state_dict(state["scaler"])
-        for key in ("step", "epoch", "batch_in_epoch", "bad_steps", "skipped_steps"):
-            setattr(self, key, int(state[key]))
-        self.best = float(state["best"])
-        self.seconds_before = float(state.get("train_seconds", 0.0))  # absent in checkpoints of older versions
-        if self.env.world == 1:  # per-rank RNG streams are only saved for rank 0
-            torch.set_rng_state(state["rng"]["torch"].cpu())
-            random.setstate(_as_tuple(state["rng"]["python"]))
-            if self.device.type == "cuda" and state["rng"]["cuda"]:
-                torch.cuda.set_rng_state_all([s.cpu() for s in state["rng"]["cuda"]])
-
-    def save(self) -> None:
-        """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
-        as ``last.prev.pt``, what a resume falls back to should the newest not load."""
-        if self.env.main:
-            last = self.out / "checkpoints" / "last.pt"
-            if last.is_file():
-                keep_copy(last, last.with_name(PREVIOUS))
-            save_checkpoint(last, self.state())
-
-    def save_weights(self, name: str, selected_by: str | None = None) -> None:
-        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
-        ``selected_by`` says how a selected checkpoint (best.pt) was chosen."""
-        if self.env.main:
-            save_checkpoint(
-                self.out / "checkpoints" / name,
-                {
-                    "config": self.config.to_dict(),
-                    "model": self.eval_model.state_dict(),
-                    "weights": self.weights,
-                    "step": self.step,
-                    "epoch": self.epoch,
-                    "best": self.best,
-                    "selected_by": selected_by,
-                    "initialisation": self.initialisation,
-                },
-            )
-
-    def _save_epoch(self) -> None:
-        keep = self.config.train.keep_epochs
-        if keep == 0 or not self.env.main:
-            return
-        self.save_weights(f"epoch_{self.epoch:02d}.pt")
-        if keep > 0:
-            snapshots = sorted((self.out / "checkpoints").glob("epoch_*.pt"), key=lambda p: int(p.stem[6:]))
-            for old in snapshots[:-keep]:
-                old.unlink()
+        self.writer = open_log(self.out) if self.env.main else None
 
     # ------------------------------------------------------------------ loop
-    def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
-        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch). One loader
-        serves every epoch, so its workers persist; the sampler tells them the epoch."""
-        t = self.config.train
-        if self._train_loader is None:
-            workers = self.config.data.num_workers
-            self._train_loader = DataLoader(
-                self.train_set,
-                batch_size=t.batch_size,
-                sampler=EpochOrder(self.train_set, self.env.world, self.env.rank, t.seed),
-                drop_last=True,
-                num_workers=workers,
-                pin_memory=self.device.type == "cuda",
-                persistent_workers=workers > 0,
-                # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
-                generator=torch.Generator().manual_seed(t.seed),
-            )
-        self._train_loader.sampler.start(epoch, skip_batches * t.batch_size)
-        return self._train_loader
-
-    def _autocast(self):
-        dtype = {"bf16": torch.bfloat16, "16": torch.float16}.get(self.precision)
-        return torch.autocast(self.device.type, dtype=dtype, enabled=dtype is not None)
-
-    @property
-    def _val_steps(self) -> int:
-        """Steps between validations; 0 when validation is per epoch or off."""
-        every = self.config.train.val_every
-        return every if isinstance(every, int) else 0
-
-    def total_steps(self) -> int:
-        t = self.config.train
-        full = self.steps_per_epoch * t.epochs
-        return min(full, t.max_steps) if t.max_steps else full
-
     def fit(self) -> dict[str, Any]:
         total = self.total_steps()
         bar = tqdm(total=total, initial=self.step, disable=self.quiet, dynamic_ncols=True, unit="step")
@@ -488,23 +181,10 @@ class Trainer:
             self.writer.close()
         return summary
 
-    def _stop_requested(self) -> bool:
-        """True once a signal asked to stop; every rank must agree, or the others would wait forever."""
-        if self.env.world == 1:
-            return bool(self.stop.signum)
-        flag = torch.tensor([self.stop.signum], device=self.device)
-        dist.all_reduce(flag, op=dist.ReduceOp.MAX)
-        self.stop.signum = int(flag.item())
-        return bool(self.stop.signum)
-
-    def _stop_now(self) -> None:
-        self.save()
-        name = signal.Signals(self.stop.signum).name
-        raise Interrupted(
-            f"stopped by {name} at step {self.step}; the state is saved in "
-            f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
-            self.stop.signum,
-        )
+    def total_steps(self) -> int:
+        t = self.config.train
+        full = self.steps_per_epoch * t.epochs
+        return min(full, t.max_steps) if t.max_steps else full
 
     def _loop(self, total: int, bar) -> dict[str, Any]:
         """The epochs and steps from the current position to ``total``; returns the last validation."""
@@ -540,6 +220,32 @@ class Trainer:
             self.save()
         return last_metrics
 
+    @property
+    def _val_steps(self) -> int:
+        """Steps between validations; 0 when validation is per epoch or off."""
+        every = self.config.train.val_every
+        return every if isinstance(every, int) else 0
+
+    def _loader(self, epoch: int, skip_batches: int) -> DataLoader:
+        """This rank's batches of ``epoch``, from batch ``skip_batches`` on (a resumed epoch). One loader
+        serves every epoch, so its workers persist; the sampler tells them the epoch."""
+        t = self.config.train
+        if self._train_loader is None:
+            workers = self.config.data.num_workers
+            self._train_loader = DataLoader(
+                self.train_set,
+                batch_size=t.batch_size,
+                sampler=EpochOrder(self.train_set, self.env.world, self.env.rank, t.seed),
+                drop_last=True,
+                num_workers=workers,
+                pin_memory=self.device.type == "cuda",
+                persistent_workers=workers > 0,
+                # The loader's own generator keeps worker seeding off the global RNG stream (exact resume).
+                generator=torch.Generator().manual_seed(t.seed),
+            )
+        self._train_loader.sampler.start(epoch, skip_batches * t.batch_size)
+        return self._train_loader
+
     def _micro_step(self, batch: dict, last: bool) -> tuple[dict[str, float] | None, dict]:
         """Forward/backward of one micro-batch; the optimiser steps on the last of ``grad_accum``.
 
@@ -553,7 +259,7 @@ class Trainer:
         sync = last or self.env.world == 1
         context = self.ddp.no_sync() if not sync and hasattr(self.ddp, "no_sync") else contextlib.nullcontext()
         with context:
-            with self._autocast():
+            with autocast(self.precision, self.device):
                 outputs, losses = self.ddp(batch, step=self.step)
             finite = torch.isfinite(losses["total"]).float()
             if self.env.world > 1:  # every rank must agree to skip, or DDP would hang
@@ -564,7 +270,7 @@ class Trainer:
             self.scaler.scale(losses["total"] / t.grad_accum).backward()
         if not last:
             return None, outputs
-        with self._warmup():
+        with warmed_up(self.optimizer, self.scheduler, warmup_factor(self.step + 1, t.warmup_steps)):
             self.scaler.step(self.optimizer)
         self.scaler.update()
         if self.ema is not None:  # AveragedModel's first update copies the weights, then ema ← d·ema + (1 − d)·w
@@ -572,31 +278,6 @@ class Trainer:
         self.optimizer.zero_grad(set_to_none=True)
         self.bad_steps = 0
         return {k: float(v.detach()) for k, v in losses.items()}, outputs
-
-    @contextlib.contextmanager
-    def _warmup(self):
-        """The learning rate × (step / train.warmup_steps) during the first steps, on top of the
-        epoch schedule, which sees (and saves) only its own rate. From scratch, Adam's first
-        updates are lr-sized on every weight at once: without warm-up the pose net's translation
-        grows fivefold in one step, far beyond the range where the photometric gradient tells
-        forward from backward (experiments/investigation.md §3)."""
-        factor = self._warmup_factor(self.step + 1)
-        if factor == 1.0:
-            yield
-            return
-        groups, rates = self.optimizer.param_groups, self.scheduler.get_last_lr()
-        for group, lr in zip(groups, rates):
-            group["lr"] = lr * factor
-        try:
-            yield
-        finally:
-            for group, lr in zip(groups, rates):
-                group["lr"] = lr
-
-    def _warmup_factor(self, step: int) -> float:
-        """The share of the scheduled learning rate that step ``step`` (counted from 1) uses."""
-        warmup = self.config.train.warmup_steps
-        return min(1.0, step / warmup) if warmup else 1.0
 
     def _skip_step(self) -> None:
         self.optimizer.zero_grad(set_to_none=True)
@@ -611,29 +292,32 @@ class Trainer:
             )
 
     def _log(self, losses: dict[str, float], batch: dict, outputs: dict) -> None:
-        t = self.config.train
-        if not self.writer:
-            return
-        if self.step % t.log_every == 0 or self.step == 1:
-            for k, v in losses.items():
-                self.writer.add_scalar(f"loss/{k}", v, self.step)
-            lr = self.optimizer.param_groups[0]["lr"] * self._warmup_factor(self.step)  # of the step just taken
-            self.writer.add_scalar("lr", lr, self.step)
-            for k, v in collapse_signs(outputs).items():
-                self.writer.add_scalar(f"mask/{k}", v, self.step)
-        if t.image_every and self.step % t.image_every == 0:
-            self.writer.add_image("input", batch["frames"][0, 0], self.step)
-            disp = outputs["disp"][0][0].detach().float()
-            # floored: a disparity collapsed to 0 everywhere shows black instead of NaN
-            self.writer.add_image("disparity", disp / disp.max().clamp_min(torch.finfo(disp.dtype).tiny), self.step)
-            self.writer.add_image("automask", outputs["automask"][0:1].float(), self.step)
+        if self.writer:  # the rate that the step just taken used, warm-up included
+            lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, self.config.train.warmup_steps)
+            log_step(self.writer, self.config.train, self.step, losses, lr, batch, outputs)
 
+    def _stop_requested(self) -> bool:
+        """True once a signal asked to stop; every rank must agree, or the others would wait forever."""
+        if self.env.world > 1:
+            flag = torch.tensor([self.stop.signum], device=self.device)
+            dist.all_reduce(flag, op=dist.ReduceOp.MAX)
+            self.stop.signum = int(flag.item())
+        return bool(self.stop.signum)
+
+    def _stop_now(self) -> None:
+        self.save()
+        name = signal.Signals(self.stop.signum).name
+        raise Interrupted(
+            f"stopped by {name} at step {self.step}; the state is saved in "
+            f"{self.out / 'checkpoints' / 'last.pt'}: continue with the same command plus --resume",
+            self.stop.signum,
+        )
+
+    # ------------------------------------------------------------------ validation
     def validate(self) -> dict[str, Any]:
-        """Validate on the main rank while the other ranks wait at a barrier (a long validation would
-        otherwise reach the training collectives' timeout, NCCL's 10 minutes, in their next step)."""
+        """Validate on the main rank while the other ranks wait."""
         metrics = self._validate_here() if self.validator else {}
-        if self._validation_wait is not None:
-            dist.monitored_barrier(self._validation_wait, timeout=VALIDATION_WAIT)
+        wait_for_validation(self._validation_wait)
         return metrics
 
     def _validate_here(self) -> dict[str, Any]:
@@ -643,162 +327,74 @@ class Trainer:
         if not metrics:
             return metrics
         if self.writer:
-            for k, v in metrics.items():
-                if isinstance(v, (int, float)) and math.isfinite(v):
-                    self.writer.add_scalar(f"val/{k}", v, self.step)
+            log_validation(self.writer, self.step, metrics)
         score = metrics[self.config.train.best_metric]
         if score < self.best:
             self.best = score
             self.save_weights("best.pt", selected_by=self.config.train.best_metric)
         return metrics
 
+    # ------------------------------------------------------------------ checkpoints
+    @property
+    def eval_model(self) -> PoseConsModel:
+        """The weights that validation and every checkpoint's "model" hold: the EMA when it is on."""
+        return self.ema.module if self.ema is not None else self.model
 
-def collapse_signs(outputs: dict) -> dict[str, float]:
-    """The two signs of a run collapsing from scratch (experiments/investigation.md §3), from the model's outputs:
-    the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the rest
-    from the loss), and the share of full-scale disparities pinned at the far end (sigmoid < 0.01)."""
-    return {
-        "warped_fraction": float(outputs["automask"].float().mean()),
-        "far_fraction": float((outputs["disp"][0].detach() < 0.01).float().mean()),
-    }
+    def save(self) -> None:
+        """The full training state, for resuming: ``checkpoints/last.pt``; the one it replaces stays
+        as ``last.prev.pt``, what a resume falls back to should the newest not load."""
+        if self.env.main:
+            last = self.out / "checkpoints" / "last.pt"
+            if last.is_file():
+                keep_copy(last, last.with_name(PREVIOUS))
+            save_checkpoint(last, training_state(self))
 
+    def save_weights(self, name: str, selected_by: str | None = None) -> None:
+        """Weights, config and step only — a third of ``last.pt``, enough to evaluate or predict.
+        ``selected_by`` says how a selected checkpoint (best.pt) was chosen."""
+        if self.env.main:
+            save_checkpoint(
+                self.out / "checkpoints" / name,
+                {
+                    "config": self.config.to_dict(),
+                    "model": self.eval_model.state_dict(),
+                    "weights": self.weights,
+                    "step": self.step,
+                    "epoch": self.epoch,
+                    "best": self.best,
+                    "selected_by": selected_by,
+                    "initialisation": self.initialisation,
+                },
+            )
 
-def resolve_precision(precision: str, device: torch.device) -> tuple[str, str]:
-    """``train.precision`` on ``device``: "auto" becomes "bf16" where the device computes bf16 natively
-    (a CUDA GPU that supports it; a CPU with AVX-512 BF16 or AMX, as torch reports) and "32" elsewhere,
-    where emulated bf16 would be slower than fp32. Returns (precision, why; why empty unless "auto")."""
-    if precision != "auto":
-        return precision, ""
-    if device.type == "cuda":
-        native = torch.cuda.is_bf16_supported()
-        where = f"{torch.cuda.get_device_name(device)} {'has' if native else 'lacks'} bf16"
-    else:
-        cpu = getattr(torch, "cpu", None)
-        checks = [getattr(cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
-        native = any(check() for check in checks if check is not None)
-        where = f"this CPU {'has' if native else 'lacks'} AVX-512 BF16 / AMX"
-    return ("bf16" if native else "32"), f"auto: {where}"
-
-
-def initial_model(config: Config, seed: int | None = None) -> PoseConsModel:
-    """The network a run of ``config`` starts from. The RNGs are seeded with ``seed`` (default
-    ``train.seed``) right before it is built, so nothing set up earlier (data, validation, a
-    variant's options) can shift the initial weights: every variant of a study with the same seed
-    starts from the same weights, and training continues the RNG streams from here. With
-    ``train.init_from`` the weights are that file's."""
-    seed = config.train.seed if seed is None else seed
-    random.seed(seed)
-    torch.manual_seed(seed)
-    if config.train.init_from is None:
-        return PoseConsModel(config)
-    model = PoseConsModel(_without_imagenet(config))  # the weights come from train.init_from
-    model.initialisation = load_initial_weights(model, config.train.init_from)
-    return model
-
-
-def save_initial_weights(path: str | Path, config: Config) -> None:
-    """The untrained network of ``config`` (:func:`initial_model`) as a weights checkpoint at step 0,
-    the reference row of an evaluation."""
-    config = copy.deepcopy(config)
-    model = initial_model(config)
-    config.model.pretrained = model.initialisation.startswith("ImageNet")  # what "auto" resolved to
-    save_checkpoint(
-        path,
-        {"config": config.to_dict(), "model": model.state_dict(), "step": 0, "initialisation": model.initialisation},
-    )
+    def _save_epoch(self) -> None:
+        keep = self.config.train.keep_epochs
+        if keep == 0 or not self.env.main:
+            return
+        self.save_weights(f"epoch_{self.epoch:02d}.pt")
+        if keep > 0:
+            snapshots = sorted((self.out / "checkpoints").glob("epoch_*.pt"), key=lambda p: int(p.stem[6:]))
+            for old in snapshots[:-keep]:
+                old.unlink()
 
 
-def describe_selection(best_metric: str) -> str:
-    """How best.pt is chosen, in words for logs and reports."""
-    return {
-        "val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
-        "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)",
-    }[best_metric]
-
-
-def _without_imagenet(config):
-    """A copy of a Config (or its dict) that builds the networks without fetching ImageNet weights
-    (or, a Config, reading train.init_from)."""
-    config = copy.deepcopy(config)
-    if isinstance(config, dict):
-        config["model"]["pretrained"] = False
-    else:
-        config.model.pretrained = False
-        config.train.init_from = None
-    return config
-
-
-def use_deterministic_algorithms(device: torch.device) -> None:
-    """Deterministic kernels for exact resume. On CUDA, cuBLAS needs a fixed workspace and some
-    backward kernels (grid_sample, reflection padding, bilinear interpolation) have no
-    deterministic version: PyTorch then warns instead of raising, and results can differ in
-    the last bits between runs."""
-    if device.type == "cuda":
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-        torch.backends.cudnn.benchmark = False
-    torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
-
-
-def _remove_all_but(out: Path, keep: set[str]) -> None:
-    """Remove the entries of a run folder whose files are all posecons's own, but those named ``keep``."""
-    for entry in out.iterdir():
-        if entry.name in keep:
-            continue
-        if entry.is_dir() and not entry.is_symlink():
-            shutil.rmtree(entry)
-        else:
-            entry.unlink()
-
-
-def _write_crash_record(trainer: Trainer, exc: BaseException) -> None:
-    """``RUN/crash.log`` (the error and its traceback) beside the flushed ``RUN/tb/``: what stays of a
-    run that crashed before its first checkpoint, whose other files are removed."""
-    out = trainer.out
-    if trainer.writer:
-        trainer.writer.close()
-    error = "".join(traceback.format_exception_only(exc)).strip()
-    write_text(
-        out / CRASH_LOG,
-        f"training crashed at step {trainer.step}: {error}\n\n" + "".join(traceback.format_exception(exc)),
-    )
-    print(
-        f"{out}: the run crashed at step {trainer.step}, before its first checkpoint; the error is in "
-        f"{out / CRASH_LOG}, the TensorBoard log in {out / 'tb'}",
-        file=sys.stderr,
-    )
-
-
-def _as_tuple(value):
-    """Python's RNG state comes back from the checkpoint with lists where it had tuples."""
-    return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
-
-
-def train(
-    config: Config,
-    data_path: str | Path,
-    out: str | Path,
-    split_dir: str | Path | None = None,
-    resume: bool = False,
-    accelerator: str = "auto",
-    quiet: bool = False,
-) -> dict[str, Any]:
-    """Train a run and return a summary (steps, minutes, last validation metrics)."""
+def train(config: Config, data_path: str | Path, out: str | Path, **options: Any) -> dict[str, Any]:
+    """Train a run and return a summary (steps, minutes, last validation metrics); ``options`` are
+    :class:`Trainer`'s (split_dir, resume, accelerator, quiet)."""
     out = Path(out)
-    main = int(os.environ.get("RANK", 0)) == 0
+    main = Dist.from_environment().main
     stop = StopRequest()
     with stop.installed():
-        with _hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
-            trainer = Trainer(config, data_path, out, split_dir, resume, accelerator, quiet)
+        with hold_run_dir(out) if main else contextlib.nullcontext() as fresh:
+            trainer = Trainer(config, data_path, out, **options)
             trainer.stop = stop
             try:
                 summary = trainer.fit()
             except Exception as exc:  # bad input (one line, exit 2) and interrupts are no crash: no record
                 if fresh and not isinstance(exc, PoseconsError) and not (out / "checkpoints" / "last.pt").exists():
-                    _write_crash_record(trainer, exc)
+                    write_crash_record(out, trainer.step, exc, trainer.writer)
                 raise
             if trainer.env.main:
                 write_json(out / "train_summary.json", summary)
-    if dist.is_initialized():
-        dist.barrier()
-        dist.destroy_process_group()
+    finish_distributed()
     return summary

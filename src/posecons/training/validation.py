@@ -90,3 +90,11 @@ class Validator:
         write_json(self.out / "metrics" / f"step_{step:06d}.json", metrics)
         append_record(self.out / "metrics.jsonl", metrics)  # a resumed run replaces the rows it repeats
         return metrics
+
+
+def describe_selection(best_metric: str) -> str:
+    """How best.pt is chosen, in words for logs and reports."""
+    return {
+        "val_photometric": "the validation photometric loss (self-supervised, no ground truth)",
+        "abs_rel": "the validation abs rel against LiDAR ground truth (supervised selection)",
+    }[best_metric]
