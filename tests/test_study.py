@@ -22,6 +22,7 @@ from posecons.errors import PoseconsError
 from posecons.study import report, runner
 from posecons.study.spec import load_spec
 from posecons.training.initial_weights import save_initial_weights
+from posecons.training.precision import cpu_kind
 from posecons.training.trainer import Trainer
 
 SYNTH = {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}
@@ -235,7 +236,7 @@ def test_a_spec_pins_the_compute_threads_of_its_runs_and_records_them(tmp_path, 
     finally:
         torch.set_num_threads(before)
     result = json.loads((out / "results" / "baseline_seed0.json").read_text())
-    assert seen == [1] and result["environment"]["threads"] == 1
+    assert seen == [1] and result["environment"]["threads"] == 1 and result["environment"]["cpu"] == cpu_kind()
     assert "compute threads per run: 1, pinned by the spec" in (out / "results.md").read_text()
     with pytest.raises(PoseconsError, match="threads must be an integer ≥ 1"):
         load_spec(write_spec(tmp_path / "bad.yaml", threads=0))

@@ -349,18 +349,22 @@ def test_bf16_training_on_the_cpu_runs_the_networks_under_autocast(synth_data, t
 
 
 def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
-    from posecons.training.precision import resolve_precision
+    from posecons.training.precision import cpu_kind, resolve_precision
 
     cpu = torch.device("cpu")
-    assert resolve_precision("32", cpu) == ("32", "") and resolve_precision("bf16", cpu) == ("bf16", "")
+    assert resolve_precision("32", cpu) == ("32", "")
     for avx512_bf16, amx, expected in ((True, False, "bf16"), (False, True, "bf16"), (False, False, "32")):
         monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda v=avx512_bf16: v, raising=False)
         monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda v=amx: v, raising=False)
         precision, why = resolve_precision("auto", cpu)
-        assert (
-            precision == expected
-            and why == f"auto: this CPU {'has' if expected == 'bf16' else 'lacks'} AVX-512 BF16 / AMX"
+        has = "has" if expected == "bf16" else "lacks"
+        assert precision == expected and why == f"auto: this CPU {has} AVX-512 BF16 / AMX"
+        # bf16 asked for is bf16, with a warning where it is emulated; the run's record names the kind
+        warning = (
+            "" if has == "has" else "emulated: this CPU lacks AVX-512 BF16 / AMX, so bf16 is much slower than 32 here"
         )
+        assert resolve_precision("bf16", cpu) == ("bf16", warning)
+        assert cpu_kind().endswith(f", bf16 {'native' if has == 'has' else 'emulated'}")
     monkeypatch.delattr(torch.cpu, "_is_avx512_bf16_supported")  # a torch without the probes: fp32, the safe side
     monkeypatch.delattr(torch.cpu, "_is_amx_tile_supported")
     assert resolve_precision("auto", cpu)[0] == "32"

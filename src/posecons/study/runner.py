@@ -58,6 +58,7 @@ from ..evaluation import evaluate
 from ..fileio import check_writable, make_dirs, write_json, write_text
 from ..inference.backend import Predictor, load_predictor
 from ..training.initial_weights import save_initial_weights
+from ..training.precision import cpu_kind
 from ..training.run_dir import run_in_progress
 from ..training.trainer import train
 from .report import FAILED, STUDY_FILE, read_json, write_report
@@ -207,9 +208,7 @@ def _commit() -> str:
 
 
 def environment(accelerator: str) -> dict[str, str]:
-    """Code and machine of a run, for the report's header."""
-    import torch
-
+    """Code and machine of a run: the report's header, and what pairs a run with another (threads, CPU kind, GPU)."""
     # The compute threads, since a study may run several runs side by side at fewer threads each.
     threads = torch.get_num_threads()
     machine = f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPU threads, {threads} used"
@@ -219,6 +218,7 @@ def environment(accelerator: str) -> dict[str, str]:
         "commit": _commit(),
         "machine": machine,
         "threads": threads,
+        "cpu": cpu_kind(),
         "python": platform.python_version(),
         "torch": torch.__version__,
     }
@@ -317,8 +317,6 @@ def _run_side_by_side(
     more done than one two-thread run, whose threads wait on each other. A signal is passed on to the
     runs (in sessions of their own, so a terminal's Ctrl-C reaches them once), which save and stop.
     Returns a line for each run that failed."""
-    import torch
-
     threads = spec.threads or max(1, torch.get_num_threads() // jobs)
     unsignalled: dict[tuple[str, int], subprocess.Popen] = {}  # the running runs no signal has reached
     stopped: list[int] = []
@@ -434,6 +432,12 @@ def run_study(
         todo = [r for r in spec.runs() if r not in done]
         progress = Progress(len(todo))
         progress.line(f"{len(done)} of {len(spec.runs())} runs done before, {len(todo)} to go")
+        on_cpu = accelerator == "cpu" or not torch.cuda.is_available()
+        if on_cpu and env["cpu"].endswith("emulated") and any(spec.config(*r).train.precision == "bf16" for r in todo):
+            progress.line(
+                f"warning: the runs compute in bf16, which this CPU ({env['cpu']}) emulates: each takes several "
+                "times as long as in fp32, and the report pairs them only with runs on this kind of CPU"
+            )
 
         failed = _run_side_by_side(spec, out, todo, jobs, accelerator, progress, refresh) if jobs > 1 else []
         for variant, seed in todo if jobs == 1 else []:

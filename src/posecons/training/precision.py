@@ -12,26 +12,41 @@ import torch
 from ..errors import PoseconsError
 
 
+def native_bf16(device: torch.device) -> tuple[bool, str]:
+    """Whether ``device`` computes bf16 natively (a CUDA GPU that supports it; a CPU with AVX-512 BF16 or
+    AMX, as torch reports), and that in words. Elsewhere bf16 is emulated: on an AVX2-only CPU a bf16
+    training step took 10× as long as an fp32 one (docs/performance.md)."""
+    if device.type == "cuda":
+        native = torch.cuda.is_bf16_supported()
+        return native, f"{torch.cuda.get_device_name(device)} {'has' if native else 'lacks'} bf16"
+    cpu = getattr(torch, "cpu", None)
+    checks = [getattr(cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
+    native = any(check() for check in checks if check is not None)
+    return native, f"this CPU {'has' if native else 'lacks'} AVX-512 BF16 / AMX"
+
+
+def cpu_kind() -> str:
+    """The CPU's vector capability as torch dispatches on it (e.g. AVX2, AVX512) and whether its bf16 is
+    native: a run's kernels, and so its rounding, follow from both."""
+    native, _ = native_bf16(torch.device("cpu"))
+    return f"{torch.backends.cpu.get_cpu_capability()}, bf16 {'native' if native else 'emulated'}"
+
+
 def resolve_precision(precision: str, device: torch.device) -> tuple[str, str]:
     """``train.precision`` on ``device``: "auto" becomes "bf16" where the device computes bf16 natively
-    (a CUDA GPU that supports it; a CPU with AVX-512 BF16 or AMX, as torch reports) and "32" elsewhere,
-    where emulated bf16 would be slower than fp32; float16 ("16") is an error off a GPU. Returns
-    (precision, why; why empty unless "auto")."""
+    (:func:`native_bf16`) and "32" elsewhere, where emulated bf16 would be slower than fp32; float16
+    ("16") is an error off a GPU. Returns (precision, why): why says what "auto" found, or warns that an
+    asked-for bf16 is emulated here; empty otherwise."""
     if precision == "16" and device.type != "cuda":
         raise PoseconsError(
             "train.precision=16 (float16 with a gradient scaler) needs a GPU; "
             "on a CPU use bf16 (fast where the CPU has AVX-512 BF16 or AMX) or 32"
         )
-    if precision != "auto":
+    if precision not in ("auto", "bf16"):
         return precision, ""
-    if device.type == "cuda":
-        native = torch.cuda.is_bf16_supported()
-        where = f"{torch.cuda.get_device_name(device)} {'has' if native else 'lacks'} bf16"
-    else:
-        cpu = getattr(torch, "cpu", None)
-        checks = [getattr(cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
-        native = any(check() for check in checks if check is not None)
-        where = f"this CPU {'has' if native else 'lacks'} AVX-512 BF16 / AMX"
+    native, where = native_bf16(device)
+    if precision == "bf16":
+        return "bf16", "" if native else f"emulated: {where}, so bf16 is much slower than 32 here"
     return ("bf16" if native else "32"), f"auto: {where}"
 
 
