@@ -99,11 +99,23 @@ def _partners(
     if not files:
         raise PoseconsError(f"{root / pattern}: no {what} files ({option})")
     keys = list(files)
-    found = nearest_within(_seconds(names, "colour frame"), _seconds(keys, what), max_difference)
+    found = _nearest(
+        names,
+        _seconds(keys, what),
+        max_difference,
+        lambda name: f"{frames[name]}: no {what} within {max_difference:g} s (--max-time-difference)",
+    )
+    return [files[keys[i]] for i in found]
+
+
+def _nearest(names: Sequence[str], stamps: np.ndarray, max_difference: float, missing) -> list[int]:
+    """For each frame name (a time in seconds), the index of the stamp nearest to it within
+    ``max_difference``; a frame with none is an error, ``missing(name)`` its message."""
+    found = nearest_within(_seconds(names, "colour frame"), stamps, max_difference)
     for name, index in zip(names, found):
         if index is None:
-            raise PoseconsError(f"{frames[name]}: no {what} within {max_difference:g} s (--max-time-difference)")
-    return [files[keys[i]] for i in found]
+            raise PoseconsError(missing(name))
+    return found
 
 
 def read_rgbd_frames(
@@ -140,11 +152,13 @@ def read_rgbd_frames(
     if tum_poses is None:
         return colors, depths, None
     stamps, trajectory = read_tum(tum_poses)
-    found = nearest_within(_seconds(names, "colour frame"), stamps, max_time_difference or 0.0)
-    for name, index in zip(names, found):
-        if index is None:
-            when = f"within {max_time_difference:g} s of" if max_time_difference else "at"
-            raise PoseconsError(f"{tum_poses}: no pose {when} the time of {frames[name]}")
+    when = f"within {max_time_difference:g} s of" if max_time_difference else "at"
+    found = _nearest(
+        names,
+        stamps,
+        max_time_difference or 0.0,
+        lambda name: f"{tum_poses}: no pose {when} the time of {frames[name]}",
+    )
     for index in found:
         check_rigid(trajectory[index], f"{tum_poses} (t = {stamps[index]:.6f})")
     return colors, depths, trajectory[found]
