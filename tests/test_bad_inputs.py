@@ -263,6 +263,21 @@ CASES = [
         ["two_rows_k.txt", "3 × 3 intrinsics matrix"],
     ),
     (
+        "prepare-rgbd-test-from-past-the-end",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --test-from 3 --gap 0",
+        ["frame-*.color.png", "only 0 test frames", "--test-from 3 --gap 0 of 3 frames", "at least 3"],
+    ),
+    (
+        "prepare-rgbd-gap-eats-training",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --test-from 0",
+        ["only 0 training frames", "--test-from 0 --gap 20"],
+    ),
+    (
+        "prepare-rgbd-gap-negative",
+        RGBD + " --depth frame-*.depth.png --depth-scale 1000 --test-from 1 --gap -1",
+        ["--gap", "-1"],
+    ),
+    (
         "prepare-rgbd-out-under-file",
         RGBD.replace("{out}", "{in}/blocker/x") + " --depth frame-*.depth.png --depth-scale 1000",
         ["--out", "blocker is a file"],
@@ -481,7 +496,7 @@ CASES = [
     (
         "study-spec-two-data",
         "study --spec {in}/study_two_data.yaml --out {out}",
-        ["study_two_data.yaml: data: give either"],
+        ["study_two_data.yaml: data: give one of"],
     ),
     ("study-kitti-without-data", "study --spec study/kitti_gpu --out {out}", ["kitti_gpu.yaml", "--data-path"]),
     (

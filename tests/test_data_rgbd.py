@@ -163,3 +163,37 @@ def test_tum_names_pair_by_the_nearest_time_and_quaternions_become_rotations(tmp
     np.testing.assert_allclose(poses[[0, 2]], np.eye(4)[None].repeat(2, 0), atol=1e-9)
     gts, _ = load_gt(out / "gt_depths.npz")
     assert [float(g[0, 0]) for g in gts] == pytest.approx([0.2, 0.4, 0.6])
+
+
+def test_a_later_stretch_is_held_out_for_testing_with_a_gap(tmp_path):
+    """--every 2 --test-from 8 --gap 2 of 16 frames: source frames 0, 2, 4 (before 8 − 2) train, 6 is in
+    the gap, 8–14 are the test stretch — its own drive folder, the only frames of the test split, the
+    ground truth and the odometry poses. Caught: the gap or --test-from counted in kept frames instead of
+    source frames, the test split or the ground truth or the poses taken from the whole sequence."""
+    raw, poses = write_sequence(tmp_path / "seq", count=16)
+    out = tmp_path / "out"
+    args = ["--color", "frame-*.color.png", "--depth", "frame-*.depth.png", "--poses", "frame-*.pose.txt"]
+    args += ["--depth-scale", "1000", "--fx", "20", "--fy", "20", "--cx", "8", "--cy", "6", "--every", "2"]
+    _prepare(tmp_path / "seq", out, *args, "--test-from", "8", "--gap", "2")
+    info = json.loads((out / "rgbd.json").read_text())
+    assert info["frames"] == [f"frame-{i:06d}.color.png" for i in (0, 2, 4, 8, 10, 12, 14)]
+    assert info["test_frames"] == info["frames"][3:] and (info["test_from"], info["gap"]) == (8, 2)
+    train_drive, test_drive = DRIVE, Path("custom") / "custom_drive_0001_sync"
+    assert (info["drive"], info["test_drive"]) == (train_drive.as_posix(), test_drive.as_posix())
+    gts, lines = load_gt(out / "gt_depths.npz")
+    assert lines == [f"{test_drive.as_posix()} {k} l" for k in range(4)]
+    assert [str(line) for line in read_split(out / "splits" / "custom" / "test_files.txt")] == lines
+    np.testing.assert_allclose(np.stack(gts), raw[8::2] / 1000 * ~np.isin(raw[8::2], (0, 65535)), rtol=1e-6)
+    np.testing.assert_allclose(read_kitti_poses(out / "odometry" / "poses" / "00.txt"), poses[8::2], atol=1e-9)
+    for k, source in enumerate((8, 10, 12, 14)):
+        test_image = out / test_drive / "image_02" / "data" / f"{k:010d}.png"
+        colour = np.asarray(Image.open(tmp_path / "seq" / f"frame-{source:06d}.color.png"))
+        assert np.array_equal(np.asarray(Image.open(test_image)), colour)
+        odometry_image = out / "odometry" / "sequences" / "00" / "image_2" / f"{k:06d}.png"
+        assert odometry_image.read_bytes() == test_image.read_bytes()
+    assert sorted(p.name for p in (out / train_drive / "image_02" / "data").iterdir()) == [
+        f"{k:010d}.png" for k in range(3)
+    ]
+    splits = out / "splits" / "custom"
+    trained = read_split(splits / "train_files.txt") + read_split(splits / "val_files.txt")
+    assert [(line.folder, line.frame) for line in trained] == [(train_drive.as_posix(), 1)]

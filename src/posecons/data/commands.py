@@ -153,6 +153,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--every", type=positive_int, default=1, help="keep one frame in N (default 1), with its depth and pose"
     )
+    p.add_argument(
+        "--test-from",
+        type=non_negative_int,
+        metavar="FRAME",
+        help="hold out the frames from this one on (counted in the sorted colour frames, before --every) as the "
+        "test stretch: test split, ground truth and odometry view; default: train and test on every frame",
+    )
+    p.add_argument(
+        "--gap",
+        type=non_negative_int,
+        default=20,
+        metavar="FRAMES",
+        help="with --test-from: frames left out before the test stretch (default 20), so that no training "
+        "frame's neighbour is a test frame",
+    )
     p.set_defaults(func=_prepare_rgbd)
 
     p = subparsers.add_parser(
@@ -279,6 +294,8 @@ def _prepare_rgbd(args: argparse.Namespace) -> int:
         args.tum_poses,
         args.max_time_difference,
         args.every,
+        args.test_from,
+        args.gap,
     )
     poses = f"; poses: {args.out}/odometry/poses/{info['odometry_sequence']}.txt" if info["odometry_sequence"] else ""
     print(

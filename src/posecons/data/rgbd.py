@@ -12,7 +12,10 @@ nearest timestamp no further away than that, as TUM's ``associate.py`` pairs the
 4 × 4 camera → world file per frame or from a TUM trajectory file (``t tx ty tz qx qy qz qw``).
 
 Every frame is kept (no static-frame test: each has its ground truth) unless ``every`` keeps one in N;
-a frame's depth image and pose are those of the colour frame it is.
+a frame's depth image and pose are those of the colour frame it is. With ``test_from`` the sequence is
+split in time: frames from that one on are the test stretch (its own drive folder, the test split, the
+ground truth and the odometry view), the frames before it less a ``gap`` train and validate (another
+drive folder), and the gap's frames are left out, so that no test frame is a training frame's neighbour.
 """
 
 from __future__ import annotations
@@ -176,25 +179,31 @@ def prepare_rgbd(
     tum_poses: Optional[Path] = None,
     max_time_difference: Optional[float] = None,
     every: int = 1,
+    test_from: Optional[int] = None,
+    gap: int = 20,
     val_fraction: float = 0.1,
     seed: int = 0,
 ) -> dict:
     """Write the dataset of the sequence in ``root`` (module doc; files as :func:`read_rgbd_frames`
     finds them); ``intrinsics`` is the (3, 3) pixel K of the colour frames, ``depth_scale`` the depth
     images' values per metre (1000: millimetres), ``invalid_depth`` the values that mean no measurement.
+    ``test_from`` and ``gap`` count frames of the source sequence (before ``every``), as its names do.
     Returns the description also written to ``rgbd.json``."""
     if not (np.isfinite(depth_scale) and depth_scale > 0):
         raise PoseconsError(f"--depth-scale {depth_scale}: must be a number > 0 (depth image values per metre)")
     k = np.asarray(intrinsics, dtype=np.float64)
     colors, depths, trajectory = read_rgbd_frames(root, color, depth, poses, tum_poses, max_time_difference, every)
-    if len(colors) < 3:
-        raise PoseconsError(f"{Path(root) / color}: only {len(colors)} frames kept (need at least 3)")
-    folder, size, maps = drive_folder(0), None, []
+    stretches = _stretches(len(colors), every, test_from, gap, Path(root) / color)
+    kept = [i for stretch in stretches for i in stretch]
+    folders, size, maps = [drive_folder(d) for d in range(len(stretches))], None, []
     with output_dir(out) as tmp:
-        data = tmp / folder / "image_02" / "data"
-        data.mkdir(parents=True)
-        for index, (color_file, depth_file) in enumerate(zip(colors, depths)):
-            img = load_rgb(color_file, None if size is None else (colors[0], size))
+        frames = {}  # kept index → (drive folder, frame number in it)
+        for folder, stretch in zip(folders, stretches):
+            (tmp / folder / "image_02" / "data").mkdir(parents=True)
+            frames.update({index: (folder, f) for f, index in enumerate(stretch)})
+        for index in kept:
+            color_file, depth_file = colors[index], depths[index]
+            img = load_rgb(color_file, None if size is None else (colors[kept[0]], size))
             size = img.size
             gt = read_depth_image(depth_file, depth_scale, invalid_depth)
             if gt.shape != (size[1], size[0]):
@@ -202,24 +211,30 @@ def prepare_rgbd(
                     f"{depth_file}: depth image is {gt.shape[1]}×{gt.shape[0]} pixels but its colour frame "
                     f"{color_file} is {size[0]}×{size[1]}; ground truth must be registered to the colour frame"
                 )
-            img.save(data / f"{index:010d}.png", compress_level=1)
-            maps.append(gt)
+            folder, f = frames[index]
+            img.save(tmp / folder / "image_02" / "data" / f"{f:010d}.png", compress_level=1)
+            if folder == folders[-1]:
+                maps.append(gt)
         write_calibration(tmp, k, size)
-        lines = [SplitLine(folder, f, "l") for f in range(len(colors))]
-        n_val = write_train_val(tmp, lines[1:-1], val_fraction, seed)  # lines with both neighbours
-        write_split(tmp / "splits" / "custom" / "test_files.txt", lines, frame_digits=10)
-        write_gt(tmp / GT_FILE, maps, lines)
+        lines = [
+            [SplitLine(folder, f, "l") for f in range(len(stretch))] for folder, stretch in zip(folders, stretches)
+        ]
+        n_val = write_train_val(tmp, lines[0][1:-1], val_fraction, seed)  # lines with both neighbours
+        write_split(tmp / "splits" / "custom" / "test_files.txt", lines[-1], frame_digits=10)
+        write_gt(tmp / GT_FILE, maps, lines[-1])
         if trajectory is not None:
             sequence = tmp / "odometry" / "sequences" / SEQUENCE
-            for index in range(len(colors)):
-                keep_copy(data / f"{index:010d}.png", sequence / "image_2" / f"{index:06d}.png")
+            for f, line in enumerate(lines[-1]):
+                keep_copy(
+                    tmp / line.folder / "image_02" / "data" / f"{f:010d}.png", sequence / "image_2" / f"{f:06d}.png"
+                )
             p2 = np.concatenate([k, np.zeros((3, 1))], axis=1)
             (sequence / "calib.txt").write_text(format_calib({"P2": p2.ravel()}, calib_time=None))
-            write_kitti_poses(tmp / "odometry" / "poses" / f"{SEQUENCE}.txt", trajectory)
+            write_kitti_poses(tmp / "odometry" / "poses" / f"{SEQUENCE}.txt", trajectory[stretches[-1]])
         info = {
             "source": str(Path(root).resolve()),
-            "frames": [c.relative_to(root).as_posix() for c in colors],
-            "depth_images": [d.relative_to(root).as_posix() for d in depths],
+            "frames": [colors[i].relative_to(root).as_posix() for i in kept],
+            "depth_images": [depths[i].relative_to(root).as_posix() for i in kept],
             "poses": poses or (str(tum_poses) if tum_poses else None),
             "every": every,
             "max_time_difference": max_time_difference,
@@ -228,8 +243,12 @@ def prepare_rgbd(
             "width": size[0],
             "height": size[1],
             "intrinsics_px": dict(zip(("fx", "fy", "cx", "cy"), k[[0, 1, 0, 1], [0, 1, 2, 2]].tolist())),
-            "drive": folder,
-            "train": len(colors) - 2 - n_val,
+            "drive": folders[0],
+            "test_drive": folders[-1],
+            "test_from": test_from,
+            "gap": gap if test_from is not None else None,
+            "test_frames": [colors[i].relative_to(root).as_posix() for i in stretches[-1]],
+            "train": len(stretches[0]) - 2 - n_val,
             "val": n_val,
             "test_split": "splits/custom/test_files.txt",
             "ground_truth": GT_FILE,
@@ -237,3 +256,22 @@ def prepare_rgbd(
         }
         (tmp / "rgbd.json").write_text(json.dumps(info, indent=2) + "\n")
     return info
+
+
+def _stretches(count: int, every: int, test_from: Optional[int], gap: int, where: Path) -> list[list[int]]:
+    """The kept frames' indices as [all] or, with ``test_from``, [train stretch, test stretch]: kept
+    frame i is source frame i · ``every``; the test stretch starts at source frame ``test_from``, the
+    training one ends ``gap`` source frames before it."""
+    if test_from is None:
+        stretches = [list(range(count))]
+    else:
+        stretches = [
+            [i for i in range(count) if i * every < test_from - gap],
+            [i for i in range(count) if i * every >= test_from],
+        ]
+    names = ["frames kept"] if test_from is None else ["training frames (before --test-from less --gap)", "test frames"]
+    for stretch, what in zip(stretches, names):
+        if len(stretch) < 3:
+            hint = "" if test_from is None else f" with --test-from {test_from} --gap {gap} of {count * every} frames"
+            raise PoseconsError(f"{where}: only {len(stretch)} {what}{hint} (need at least 3)")
+    return stretches
