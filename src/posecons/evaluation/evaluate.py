@@ -157,10 +157,12 @@ def checkpoint_depth(
     gt_path: Path,
     scalings: Sequence[str] = ("frame",),
     stabilised: bool = False,
+    gt_kind: str = "lidar",
+    depth_range: tuple[float, float] | None = None,
 ) -> dict[str, dict]:
     """{scaling: :func:`evaluate_depth`} of a checkpoint's disparities (predicted once) on the ``split``
-    lines against the LiDAR ground truth exported to ``gt_path`` (``checkpoint``: a path, or networks
-    already loaded); with ``stabilised`` also
+    lines against the ground truth in ``gt_path`` (exported LiDAR, or ``gt_kind`` "dense" with its
+    ``depth_range``; ``checkpoint``: a path, or networks already loaded); with ``stabilised`` also
     {"<scaling>_stabilised": ...} of the same disparities after :func:`stabilised_disparities`, whose
     ``stabiliser_factors`` it records."""
     gts, _ = load_gt(gt_path)
@@ -169,7 +171,9 @@ def checkpoint_depth(
     if stabilised:
         runs["_stabilised"], factors = stabilised_disparities(predictor, data_path, split, runs[""])
     results = {
-        s + suffix: evaluate_depth(disps, gts, split, scaling=s, pred_name=name, gt_name=str(gt_path))
+        s + suffix: evaluate_depth(
+            disps, gts, split, gt_kind, scaling=s, pred_name=name, gt_name=str(gt_path), depth_range=depth_range
+        )
         for suffix, disps in runs.items()
         for s in scalings
     }

@@ -5,12 +5,18 @@ preset: synth/demo                  # every run's preset: a bundled name or a fi
 overrides: ["train.max_steps=600"]  # applied to every run, before the variant's
 data:                               # either synth (generated once into OUT/data) ...
   synth: {drives: 6, frames: 120, width: 384, height: 128, neighbours: 3, seed: 0}
+# ... or an RGB-D sequence (--data-path overrides input), prepared once into OUT/data by
+# `posecons prepare-rgbd` with a held-out test stretch and scored on its dense depth and poses:
+#   rgbd: {input: ../shared/real/7scenes, color: "frame-*.color.jpg", depth: "frame-*.depth.png",
+#          depth_scale: 1000, poses: "frame-*.pose.txt", calib: camera-intrinsics.txt (in input),
+#          every: 5, test_from: 620, gap: 20, min_depth: 0.1, max_depth: 10}
 # ... or a KITTI raw root (--data-path overrides it) and its test split, with optional pose data:
 #   path: /data/kitti_raw
 #   test_split: eigen                 # bundled name or file
 #   odometry: /data/kitti_odometry    # optional (--odometry-path): the pose table
 #   odometry_sequences: [9, 10]
 seeds: [0, 1, 2]                    # train.seed of the runs
+stabilise: true                     # optional: also score each run's depth after the test-time stabiliser
 threads: 1                          # optional: the compute threads of every run (the outcome depends on
                                     # them as much as on the seed); unset, a run gets the process's share
 variants:                           # the first is the reference of the paired differences
@@ -35,9 +41,11 @@ import yaml
 from ..config import STUDY_SPECS, Config, load_config, resolve_preset
 from ..errors import PoseconsError
 
-KEYS = {"preset", "overrides", "data", "seeds", "variants", "threads"}
+KEYS = {"preset", "overrides", "data", "seeds", "variants", "threads", "stabilise"}
 SYNTH_ARGS = ("drives", "frames", "width", "height", "neighbours", "seed", "ext")  # generate_synth's; ext optional
 PATH_KEYS = {"path", "test_split", "odometry", "odometry_sequences"}
+RGBD_TEXTS = ("color", "depth", "poses", "calib")  # prepare-rgbd's patterns and calibration file, required
+RGBD_NUMBERS = {"depth_scale": None, "every": 1, "test_from": None, "gap": 20, "min_depth": 0.1, "max_depth": None}
 UNTRAINED = "untrained"  # the name of the reference row: no variant may take it
 FLOOR = "renderer_depth"  # synthetic data: the renderer's own depth evaluated as a prediction (the floor)
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")  # variant names become folder and file names
@@ -49,10 +57,11 @@ class StudySpec:
     preset: str  # as written in the spec
     preset_file: Path
     overrides: list[str]
-    data: dict[str, Any]  # {"synth": {...generate_synth arguments}} or {"path", "test_split", "odometry", ...}
+    data: dict[str, Any]  # {"synth": {...}}, {"rgbd": {...prepare_rgbd arguments}} or {"path", "test_split", ...}
     seeds: list[int]
     variants: dict[str, list[str]]
     threads: int | None = None  # compute threads of every run; None: the process's share
+    stabilise: bool = False  # also evaluate each run's depth after the test-time stabiliser (SPEC §12)
 
     @property
     def reference(self) -> str:
@@ -94,6 +103,7 @@ class StudySpec:
             "variants": self.variants,
             "reference": self.reference,
             "threads": self.threads,
+            "stabilise": self.stabilise,
         }
 
 
@@ -147,6 +157,40 @@ def _synth_data(args: Any) -> dict[str, Any]:
     return {"synth": merged}
 
 
+def _rgbd_data(args: Any, base: Path, data_path: Path | None) -> dict[str, Any]:
+    if not isinstance(args, dict):
+        raise PoseconsError(f"data.rgbd must be a mapping of prepare-rgbd arguments, got {args!r}")
+    known = ["input", *RGBD_TEXTS, *RGBD_NUMBERS]
+    unknown = sorted(set(args) - set(known))
+    if unknown:
+        raise PoseconsError(f"data.rgbd: unknown key {unknown[0]!r}; known: {', '.join(known)}")
+    missing = [key for key in (*RGBD_TEXTS, "depth_scale", "max_depth") if args.get(key) is None]
+    if missing:
+        raise PoseconsError(f"data.rgbd: missing key {missing[0]!r}")
+    if data_path is None and not args.get("input"):
+        raise PoseconsError("data.rgbd.input is not set: pass the sequence's folder with --data-path")
+    root = data_path.resolve() if data_path else _path(args["input"], base, "data.rgbd.input")
+    if not root.is_dir():
+        raise PoseconsError(f"data.rgbd.input {root} is not a directory")
+    out = {"input": str(root), **RGBD_NUMBERS, **{k: v for k, v in args.items() if k != "input"}}
+    for key in RGBD_TEXTS:
+        if not isinstance(out[key], str):
+            raise PoseconsError(f"data.rgbd.{key} must be a text, got {out[key]!r}")
+    for key in RGBD_NUMBERS:
+        value = out[key]
+        kind = int if key in ("every", "test_from", "gap") else (int, float)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, kind) or value < (key == "every")):
+            what = "an integer" if kind is int else "a number"
+            raise PoseconsError(f"data.rgbd.{key} must be {what} ≥ {int(key == 'every')}, got {value!r}")
+    if not 0 < out["min_depth"] < out["max_depth"]:
+        raise PoseconsError(
+            f"data.rgbd: min_depth {out['min_depth']} and max_depth {out['max_depth']} must be 0 < min < max"
+        )
+    if not (root / out["calib"]).is_file():
+        raise PoseconsError(f"data.rgbd.calib: {root / out['calib']} does not exist (a file in the input folder)")
+    return {"rgbd": out}
+
+
 def _kitti_data(data: dict, base: Path, data_path: Path | None, odometry_path: Path | None) -> dict[str, Any]:
     from ..data.kitti_odometry import sequence_dir
     from ..data.splits import find_split_file
@@ -181,8 +225,15 @@ def _kitti_data(data: dict, base: Path, data_path: Path | None, odometry_path: P
 
 
 def _data(data: Any, base: Path, data_path: Path | None, odometry_path: Path | None) -> dict[str, Any]:
-    if not isinstance(data, dict) or ("synth" in data) == bool(set(data) & {"path", "test_split"}):
-        raise PoseconsError("data: give either synth: {generator arguments} or path: (and test_split:)")
+    generated = [key for key in ("synth", "rgbd") if key in data] if isinstance(data, dict) else []
+    if not isinstance(data, dict) or len(generated) + bool(set(data) & {"path", "test_split"}) != 1:
+        raise PoseconsError(
+            "data: give one of synth: {generator arguments}, rgbd: {sequence}, or path: (and test_split:)"
+        )
+    if "rgbd" in data:
+        if odometry_path or len(data) > 1:
+            raise PoseconsError("data.rgbd: the sequence's own poses are its odometry; no other data keys apply")
+        return _rgbd_data(data["rgbd"], base, data_path)
     if "synth" in data:
         if data_path or odometry_path:
             raise PoseconsError("this spec generates synthetic data: --data-path and --odometry-path do not apply")
@@ -251,7 +302,10 @@ def load_spec(name: str | Path, data_path: Path | None = None, odometry_path: Pa
             seeds=_seeds(raw["seeds"]),
             variants=_variants(raw["variants"]),
             threads=_threads(raw.get("threads")),
+            stabilise=raw.get("stabilise", False),
         )
+        if not isinstance(spec.stabilise, bool):
+            raise PoseconsError(f"stabilise must be true or false, got {spec.stabilise!r}")
         for variant in spec.variants:
             if any(o.split("=", 1)[0].strip() == "train.seed" for o in spec.run_overrides(variant, 0)[:-1]):
                 raise PoseconsError(f"variant {variant!r}: train.seed is set by seeds:, not by an override")
@@ -259,6 +313,11 @@ def load_spec(name: str | Path, data_path: Path | None = None, odometry_path: Pa
                 config = spec.config(variant, spec.seeds[0])
             except PoseconsError as exc:
                 raise PoseconsError(f"variant {variant!r}: {exc}") from None
+            if "rgbd" in spec.data and (config.data.split, config.data.dataset) != ("custom", "kitti_raw"):
+                raise PoseconsError(
+                    f"variant {variant!r}: an RGB-D sequence trains on data.split=custom (dataset kitti_raw), "
+                    f"but its config has split {config.data.split!r}, dataset {config.data.dataset!r}"
+                )
             if "synth" in spec.data and (config.data.split, config.data.dataset) != ("synth", "kitti_raw"):
                 raise PoseconsError(
                     f"variant {variant!r}: synthetic data trains on data.split=synth (dataset kitti_raw), "
