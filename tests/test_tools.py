@@ -50,3 +50,48 @@ def test_a_folder_without_runs_is_one_line_and_exit_2(tmp_path):
     ):
         done = subprocess.run([sys.executable, str(TOOLS / argv[0]), *argv[1:]], capture_output=True, text=True)
         assert done.returncode == 2 and done.stderr.strip() == f"error: {tmp_path}: not a study folder (no runs/ in it)"
+
+
+def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_path):
+    """experiments/tools/adopt.py: a rerun equal to the old result in every number lets the sources in
+    with the rerun's threads and CPU kind, the spec's config and an adopted record; a rerun one digit off
+    adopts nothing (caught: numbers compared loosely, or the texts compared, which differ by path)."""
+    import json
+
+    spec = importlib.util.spec_from_file_location("adopt", TOOLS / "adopt.py")
+    adopt = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(adopt)
+    depth = {"frame": {"scale_cv": 0.07, "abs_rel": 0.23, "predictions": "old/last.pt"}}
+    old, rerun, source = tmp_path / "old.json", tmp_path / "rerun.json", tmp_path / "cyc_seed3.json"
+    old.write_text(json.dumps({"depth": depth, "pose": {"06": {"ate_full_rmse": 2.5}}}))
+    environment = {"threads": 1, "cpu": "AVX512, bf16 native", "commit": "abc"}
+    new_depth = {"frame": {**depth["frame"], "predictions": "new/last.pt", "depth_range": None}}
+    rerun.write_text(
+        json.dumps({"depth": new_depth, "pose": {"06": {"ate_full_rmse": 2.5}}, "environment": environment})
+    )
+    source.write_text(json.dumps({"variant": "cyc", "seed": 3, "depth": depth, "environment": {"machine": "m"}}))
+    out = tmp_path / "study"
+    assert adopt.adopt("study/synth_fast", out, [(rerun, old)], [source]) == [out / "results" / "cyc_seed3.json"]
+    taken = json.loads((out / "results" / "cyc_seed3.json").read_text())
+    assert taken["environment"] == {"machine": "m", "threads": 1, "cpu": "AVX512, bf16 native"}
+    assert taken["config"]["loss"]["constraints"] == ["cyc"] and taken["overrides"][-1] == "train.seed=3"
+    assert taken["adopted"] == {"from": str(source), "reproduced": [f"{rerun} = {old}"]}
+    off = json.loads(rerun.read_text())
+    off["pose"]["06"]["ate_full_rmse"] = 2.5000001
+    rerun.write_text(json.dumps(off))
+    (out / "results" / "cyc_seed3.json").unlink()
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(TOOLS / "adopt.py"),
+            "study/synth_fast",
+            str(out),
+            str(source),
+            "--check",
+            f"{rerun}={old}",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 2 and "does not reproduce" in result.stderr and "ate_full_rmse" in result.stderr
+    assert not (out / "results" / "cyc_seed3.json").exists()

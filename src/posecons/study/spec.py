@@ -157,6 +157,16 @@ def _synth_data(args: Any) -> dict[str, Any]:
     return {"synth": merged}
 
 
+def _root(value: Any, data_path: Path | None, base: Path, key: str, what: str) -> Path:
+    """The data folder: --data-path, else the spec's ``key`` (relative to the spec)."""
+    if data_path is None and not value:
+        raise PoseconsError(f"{key} is not set: pass {what} with --data-path")
+    root = data_path.resolve() if data_path else _path(value, base, key)
+    if not root.is_dir():
+        raise PoseconsError(f"{key} {root} is not a directory")
+    return root
+
+
 def _rgbd_data(args: Any, base: Path, data_path: Path | None) -> dict[str, Any]:
     if not isinstance(args, dict):
         raise PoseconsError(f"data.rgbd must be a mapping of prepare-rgbd arguments, got {args!r}")
@@ -167,11 +177,7 @@ def _rgbd_data(args: Any, base: Path, data_path: Path | None) -> dict[str, Any]:
     missing = [key for key in (*RGBD_TEXTS, "depth_scale", "max_depth") if args.get(key) is None]
     if missing:
         raise PoseconsError(f"data.rgbd: missing key {missing[0]!r}")
-    if data_path is None and not args.get("input"):
-        raise PoseconsError("data.rgbd.input is not set: pass the sequence's folder with --data-path")
-    root = data_path.resolve() if data_path else _path(args["input"], base, "data.rgbd.input")
-    if not root.is_dir():
-        raise PoseconsError(f"data.rgbd.input {root} is not a directory")
+    root = _root(args.get("input"), data_path, base, "data.rgbd.input", "the sequence's folder")
     out = {"input": str(root), **RGBD_NUMBERS, **{k: v for k, v in args.items() if k != "input"}}
     for key in RGBD_TEXTS:
         if not isinstance(out[key], str):
@@ -198,11 +204,7 @@ def _kitti_data(data: dict, base: Path, data_path: Path | None, odometry_path: P
     unknown = sorted(set(data) - PATH_KEYS)
     if unknown:
         raise PoseconsError(f"data: unknown key {unknown[0]!r}; known: synth, or {sorted(PATH_KEYS)}")
-    if data_path is None and not data.get("path"):
-        raise PoseconsError("data.path is not set: pass the KITTI raw root with --data-path")
-    root = data_path.resolve() if data_path else _path(data["path"], base, "data.path")
-    if not root.is_dir():
-        raise PoseconsError(f"data.path {root} is not a directory")
+    root = _root(data.get("path"), data_path, base, "data.path", "the KITTI raw root")
     split = str(data.get("test_split", "eigen"))
     split_file = find_split_file(base / split if (base / split).is_file() else split)
     out = {"path": str(root), "test_split": str(split_file.resolve())}
