@@ -330,3 +330,73 @@ def test_constraint_losses_are_over_the_whole_batch_bit_for_bit():
     torch.manual_seed(7)
     plain(batch)
     assert torch.equal(torch.get_rng_state(), rng_after)
+
+
+class PlaneDepth(nn.Module):
+    """A depth net that recognises each image as one of the known frames and returns its true depth
+    (a fronto-parallel plane: one depth per frame), as disparity at every scale."""
+
+    def __init__(self, frames: torch.Tensor, frame_ids, depths: dict):
+        super().__init__()
+        self.keys, self.ids, self.depths = frames.reshape(-1, *frames.shape[-3:]), list(frame_ids) * len(frames), depths
+
+    def forward(self, images):
+        found = (images.float()[:, None] - self.keys[None]).abs().mean((2, 3, 4)).argmin(1)
+        disp = torch.tensor([sigmoid_for_depth(self.depths[self.ids[i]]) for i in found.tolist()])
+        return {s: disp.view(-1, 1, 1, 1).expand(-1, 1, H // 2**s, W // 2**s).clone() for s in range(4)}
+
+
+class SkipLength(TrajectoryPoseNet):
+    """The true motion, with the skip pair (−1, +1)'s translation × ``length``."""
+
+    def __init__(self, frames, frame_ids, world):
+        super().__init__(frames, frame_ids, world)
+        self.length = nn.Parameter(torch.ones(()))
+
+    def forward(self, a, b, groups=1, tracked=None):
+        axisangle, translation = super().forward(a, b)
+        skip = torch.tensor([(i, j) == (-1, 1) for i, j in zip(self.frame_ids(a), self.frame_ids(b))])
+        return axisangle, torch.where(skip.view(-1, 1, 1), translation * self.length, translation)
+
+
+def textured_plane(frame_ids, distance: float, step: float, K: torch.Tensor) -> torch.Tensor:
+    """(1, F, 3, H, W): a smooth texture on the plane z = ``distance`` seen by cameras at z = f·``step``
+    (pixel (u, v) of camera f sees the plane point x = (u − cx)/fx · (distance − f·step), likewise y)."""
+    v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
+    fx, fy, cx, cy = K[0, 0] * W, K[1, 1] * H, K[0, 2] * W - 0.5, K[1, 2] * H - 0.5
+    images = []
+    for f in frame_ids:
+        x, y = (u - cx) / fx * (distance - f * step), (v - cy) / fy * (distance - f * step)
+        grey = 0.5 + 0.2 * torch.sin(1.3 * x + 0.4) * torch.sin(2.1 * y) + 0.15 * torch.cos(0.9 * x - 1.7 * y)
+        images.append(torch.stack([grey, 0.8 * grey + 0.1, 1 - grey]))
+    return torch.stack(images)[None].float()
+
+
+@pytest.mark.slow
+def test_skip_synthesis_is_least_at_the_true_skip_motion_and_pulls_a_short_skip_longer():
+    """Frames −1, 0, +1 of a textured plane 10 m ahead, the camera 0.5 m forward a frame, with the
+    true depths and steps: the skip pair's view synthesis (frame +1 seen from −1) is least at the true
+    T_{+1←−1} (1 m; 1.2 m and 0.9 m are worse), larger at 0.8 m and larger still at 0.55 m (1.1 steps,
+    what the pose net learned without it, experiments/investigation.md §5), and its gradient lengthens
+    a short skip.
+    Caught: the warp's depth taken from frame 0 or +1, the pose inverted, +1 warped into 0."""
+    frame_ids, K = [0, -1, 1], torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]])
+    frames = textured_plane(frame_ids, 10.0, 0.5, K)
+    world = world_poses(frame_ids, step=(0.0, 0.0, 0.5))
+    model = PoseConsModel(make_config(**{"loss.skip_weight": 0.3}))
+    model.depth_net = PlaneDepth(frames, frame_ids, {f: 10.0 - 0.5 * f for f in frame_ids})
+    model.pose_net = SkipLength(frames, frame_ids, world)
+    length = model.pose_net.length
+    batch = {"frames": frames, "intrinsics": K[None].clone()}
+    skip = {}
+    for value in (1.2, 1.0, 0.9, 0.8, 0.55):
+        with torch.no_grad():
+            length.fill_(value)
+        outputs, losses = model(batch)
+        skip[value] = losses["skip"]
+    # Not 0 at the truth: frame −1's border sees what frame +1 (nearer) does not, as in any warp.
+    assert skip[1.0] < 0.015 and skip[1.0] < min(skip[1.2], skip[0.9]) < skip[0.8] < skip[0.55] / 1.5
+    assert torch.allclose(losses["total"], losses["photometric"] + losses["smoothness"] + 0.3 * losses["skip"])
+    assert losses["photometric"] < 0.01  # the steps themselves are exact
+    skip[0.55].backward()
+    assert length.grad < 0  # a longer skip lowers the loss

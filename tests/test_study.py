@@ -360,6 +360,14 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         assert a.train.max_steps == 500 < b.train.max_steps and b.train.checkpoint_every == 100
         b.train.max_steps = 500
         assert a.to_dict() == b.to_dict()
+    # synth_skip shares synth_fast's runs of baseline and cyc; its new variants add the skip term only.
+    skip = load_spec(EXPERIMENTS / "synth_skip.yaml")
+    assert skip.data == short.data and all(skip.config(v, 4) == short.config(v, 4) for v in ("baseline", "cyc"))
+    for v, base in (("skip", "baseline"), ("skip_cyc", "cyc")):
+        a, b = skip.config(v, 4), short.config(base, 4)
+        assert a.loss.skip_weight == 1.0 and b.loss.skip_weight == 0
+        a.loss.skip_weight = 0
+        assert a.to_dict() == b.to_dict()
     ema = load_spec(EXPERIMENTS / "synth_ema.yaml")
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss

@@ -97,14 +97,15 @@ class PoseConsModel(nn.Module):
 
     def pose_pairs(self, constraints: list[str]) -> list[tuple[int, int]]:
         """The frame pairs (a, b) the pose net sees this step, temporal pairs first (they alone
-        update BatchNorm's running statistics): fb adds each reversed pair, id (0, 0), cyc (−n, +n)."""
+        update BatchNorm's running statistics): fb adds each reversed pair, id (0, 0), cyc and the
+        skip pair's view synthesis (−n, +n)."""
         sources = self.config.model.frame_ids[1:]
         pairs = [temporal(f) for f in sources]
         if "fb" in constraints:
             pairs += [temporal(f)[::-1] for f in sources]
         if "id" in constraints:
             pairs.append((0, 0))
-        if "cyc" in constraints:
+        if "cyc" in constraints or self.config.loss.skip_weight > 0:
             pairs.append(self.cycle_ids())
         return pairs
 
@@ -125,7 +126,9 @@ class PoseConsModel(nn.Module):
         K = check_tensor("batch['intrinsics']", batch["intrinsics"], (frames.shape[0], 3, 3)).float()
         index = {f: i for i, f in enumerate(m.frame_ids)}
 
-        if lo.depth_consistency_weight > 0:  # target and sources in one pass: the sources' depth is needed too
+        if (
+            lo.depth_consistency_weight > 0 or lo.skip_weight > 0
+        ):  # target and sources in one pass: their depth is needed too
             b = frames.shape[0]
             all_disps = self.depth_net(torch.cat([net_frames[:, i] for i in range(len(m.frame_ids))]))
             disps = {s: d[:b] for s, d in all_disps.items()}
@@ -164,7 +167,12 @@ class PoseConsModel(nn.Module):
             if lo.depth_consistency_weight > 0:
                 losses["dc"] = self._depth_consistency(disps[0], source_disp, K, poses)
                 terms.append("dc")
-            weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight, "dc": lo.depth_consistency_weight}
+            if lo.skip_weight > 0:  # frame +n seen from frame −n through T_{+n←−n}
+                prev, nxt = self.cycle_ids()
+                losses["skip"] = self._skip_synthesis(frames.float(), K, source_disp, P.T(nxt, prev, input=(prev, nxt)))
+                terms.append("skip")
+            weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
+            weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight)
             losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in terms)
 
         outputs = {
@@ -191,6 +199,23 @@ class PoseConsModel(nn.Module):
             torch.cat([poses[f] for f in sources]),
             scale_intrinsics(K_norm, m.height, m.width).repeat(len(sources), 1, 1),
         )
+
+    def _skip_synthesis(
+        self, frames: torch.Tensor, K_norm: torch.Tensor, source_disp: torch.Tensor, T_skip: torch.Tensor
+    ) -> torch.Tensor:
+        """Mean auto-masked photometric error of frame +n warped into frame −n with −n's own depth
+        (from the sources' disparities (S·B, 1, H, W), frame_ids order) and T_skip = T_{+n←−n}: the
+        skip pair's pose learns the motion over 2n frames from the images, as each step's does. Scale
+        0 only, as the depth consistency."""
+        m, lo = self.config.model, self.config.loss
+        prev, nxt = self.cycle_ids()
+        b, index = frames.shape[0], m.frame_ids[1:].index(prev)
+        depth = disp_to_depth(source_disp[index * b : (index + 1) * b].float(), m.min_depth, m.max_depth)[1]
+        target, source = frames[:, m.frame_ids.index(prev)], frames[:, m.frame_ids.index(nxt)]
+        K = scale_intrinsics(K_norm, m.height, m.width)
+        reprojection = photometric_error(warp(source, depth, T_skip, K), target, lo.ssim_weight)
+        identity = photometric_error(source, target, lo.ssim_weight) if lo.automask else None
+        return min_reprojection(reprojection, identity)[0].mean()
 
     def _view_synthesis_losses(
         self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict, poses: dict[int, torch.Tensor]
