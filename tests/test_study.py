@@ -387,7 +387,7 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         load_spec("study/kitti_gpu")
     # study/7scenes: the real sequence beside the repository, one frame in five, 620 on held out.
     seven = load_spec("study/7scenes")
-    assert Path(seven.data["rgbd"]["input"]) == (Path(__file__).resolve().parents[2] / "shared/real/7scenes")
+    assert Path(seven.data["rgbd"]["input"]) == (Path(__file__).resolve().parents[2] / "shared/real/7scenes").resolve()
     assert seven.stabilise and seven.threads == 1 and len(seven.seeds) >= 6
     assert seven.config("baseline", 0).model.frame_ids == [0, -1, 1] and seven.config("cyc", 0).data.split == "custom"
     rgbd = dict(seven.data["rgbd"], input=str(tmp_path))
