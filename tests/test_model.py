@@ -400,3 +400,39 @@ def test_skip_synthesis_is_least_at_the_true_skip_motion_and_pulls_a_short_skip_
     assert losses["photometric"] < 0.01  # the steps themselves are exact
     skip[0.55].backward()
     assert length.grad < 0  # a longer skip lowers the loss
+
+
+class Forward(nn.Module):
+    """A pose net that ignores its input: ``distance`` forward for every pair."""
+
+    def __init__(self, distance: float):
+        super().__init__()
+        self.distance = distance
+
+    def forward(self, a, b, groups=1, tracked=None):
+        return torch.zeros(len(a), 1, 3), torch.tensor([0.0, 0.0, self.distance]).expand(len(a), 1, 3)
+
+
+@pytest.mark.parametrize("v1_multiscale", [False, True])
+def test_sc_depth_form_adds_the_reverse_direction_and_weights_the_photometric_error_by_one_minus_d_diff(
+    v1_multiscale,
+):
+    """Target at 10 m, one source at 12 m, T_{+1←0} 1 m forward: the target's points land at 11 m in the
+    source (D_diff 1/23 at every pixel, all inside), the source's move back to 11 m in the target
+    (1/21). one_way: dc = 1/23; sc_depth: dc = (1/23 + 1/21) / 2 and the photometric error (auto-mask
+    off, one source: the error itself) × (1 − 1/23), at every scale. Caught: the reverse direction or
+    the mask left out, the mask not resized to a scale's size."""
+    depths = {0: 10.0, 1: 12.0}
+    frames = torch.stack([torch.full((2, 3, H, W), sigmoid_for_depth(depths[f])) for f in (0, 1)], 1)
+    K = torch.tensor([[0.58, 0, 0.5], [0, 1.92, 0.5], [0, 0, 1]]).expand(2, 3, 3).clone()
+    losses = {}
+    for form in ("one_way", "sc_depth"):
+        extra = {"model.frame_ids": "[0,1]", "loss.automask": "false", "loss.v1_multiscale": str(v1_multiscale)}
+        extra.update({"loss.depth_consistency_weight": 0.5, "loss.depth_consistency_form": form})
+        model = PoseConsModel(make_config(**extra))
+        model.depth_net, model.pose_net = DepthFromImage(), Forward(1.0)
+        losses[form] = model({"frames": frames, "intrinsics": K})[1]
+    assert losses["one_way"]["dc"].item() == pytest.approx(1 / 23, rel=1e-4)
+    assert losses["sc_depth"]["dc"].item() == pytest.approx((1 / 23 + 1 / 21) / 2, rel=1e-4)
+    one_way, masked = losses["one_way"]["photometric"].item(), losses["sc_depth"]["photometric"].item()
+    assert one_way > 1e-3 and masked == pytest.approx(one_way * (1 - 1 / 23), rel=1e-4)

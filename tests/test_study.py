@@ -368,6 +368,9 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         assert a.loss.skip_weight == 1.0 and b.loss.skip_weight == 0
         a.loss.skip_weight = 0
         assert a.to_dict() == b.to_dict()
+    scdepth = load_spec(EXPERIMENTS / "synth_scdepth.yaml")
+    assert scdepth.data == short.data and scdepth.config("cyc", 1) == short.config("cyc", 1)
+    assert scdepth.config("sc05_cyc", 1).loss.depth_consistency_form == "sc_depth"
     ema = load_spec(EXPERIMENTS / "synth_ema.yaml")
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss

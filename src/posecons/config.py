@@ -76,6 +76,7 @@ RULES: dict[str, Check] = {
     "loss.cyc_weight": _at_least(0),
     "loss.constraint_start_step": _at_least(0),
     "loss.depth_consistency_weight": _at_least(0),
+    "loss.depth_consistency_form": _one_of("one_way", "sc_depth"),
     "loss.skip_weight": _at_least(0),
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
@@ -147,6 +148,10 @@ class LossConfig:
     # SC-SfMLearner's depth consistency |D_0→f − D_f'| / (D_0→f + D_f') at scale 0 (not in the paper);
     # > 0 runs the depth net on the sources too; 0 (off) leaves every other loss as it was
     depth_consistency_weight: float = 0.0
+    # one_way: the above, target → sources only (the form the studies measured); sc_depth: SC-Depth as
+    # published — the mean over both directions (also each source's depth into the target), and the
+    # self-discovered mask 1 − D_diff (detached) weighting each source's photometric error
+    depth_consistency_form: str = "one_way"
     # View synthesis of the cycle's skip pair (−n, +n): frame +n warped into frame −n with D_{−n} and
     # T_{+n←−n}, auto-masked photometric error at scale 0 (not in the paper). Without it that pose is
     # taught by the cycle constraint alone (experiments/investigation.md §5); > 0 runs the depth net on

@@ -83,14 +83,22 @@ def depth_consistency_loss(
     target's points in camera f, D_f' is D_f sampled bilinearly where they project. Points behind
     camera f count as outside. Several sources go in as one batch (their pixels pooled in the mean).
     """
+    diff, inside = depth_difference(target_depth, source_depth, T, K)
+    return diff.sum() / inside.sum().clamp(min=1)
+
+
+def depth_difference(
+    target_depth: torch.Tensor, source_depth: torch.Tensor, T: torch.Tensor, K: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per target pixel, D_diff of :func:`depth_consistency_loss` (B, 1, H, W), 0 where the pixel lands
+    outside source f or behind its camera, and the mask of the pixels that land inside (B, 1, H, W)."""
     check_tensor("source_depth", source_depth, tuple(target_depth.shape))
     projected, grid = project_depth(target_depth, T, K)
     sampled = F.grid_sample(source_depth, grid, mode="bilinear", padding_mode="border", align_corners=True)
     inside = (grid.abs() <= 1).all(-1, keepdim=True).permute(0, 3, 1, 2) & (projected > 0)
     # Outside pixels get D_diff = 0 from finite values, so neither the value nor the gradient sees them.
     projected = torch.where(inside, projected, sampled)
-    diff = (projected - sampled).abs() / (projected + sampled)
-    return diff.sum() / inside.sum().clamp(min=1)
+    return (projected - sampled).abs() / (projected + sampled), inside
 
 
 # ----------------------------------------------------------------------------- pose constraints

@@ -21,6 +21,7 @@ from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrin
 from .losses import (
     cycle_loss,
     depth_consistency_loss,
+    depth_difference,
     forward_backward_loss,
     identity_loss,
     min_reprojection,
@@ -147,7 +148,10 @@ class PoseConsModel(nn.Module):
         with torch.autocast(frames.device.type, enabled=False):
             sources = m.frame_ids[1:]
             poses = {f: P.T(f, 0, input=temporal(f)) for f in sources}  # T_{f←0}, for warping
-            losses, automask = self._view_synthesis_losses(frames.float(), K, disps, poses)
+            dc, masks = None, None
+            if lo.depth_consistency_weight > 0:
+                dc, masks = self._depth_consistency(disps[0], source_disp, K, poses)
+            losses, automask = self._view_synthesis_losses(frames.float(), K, disps, poses, masks)
             # The paper's constraints (SPEC §5), each in the reading order of its equation.
             if "fb" in constraints:  # d(T_{f←0}, inverse(T_{0←f} from the reversed pair)) for each source
                 losses["fb"] = forward_backward_loss(
@@ -164,8 +168,8 @@ class PoseConsModel(nn.Module):
                     P.T(0, prev, input=temporal(prev)),
                 )
             terms = list(constraints)
-            if lo.depth_consistency_weight > 0:
-                losses["dc"] = self._depth_consistency(disps[0], source_disp, K, poses)
+            if dc is not None:
+                losses["dc"] = dc
                 terms.append("dc")
             if lo.skip_weight > 0:  # frame +n seen from frame −n through T_{+n←−n}
                 prev, nxt = self.cycle_ids()
@@ -185,20 +189,27 @@ class PoseConsModel(nn.Module):
 
     def _depth_consistency(
         self, disp: torch.Tensor, source_disp: torch.Tensor, K_norm: torch.Tensor, poses: dict[int, torch.Tensor]
-    ) -> torch.Tensor:
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
         """SC-SfMLearner's depth consistency of the target disparity (B, 1, H, W) with the sources'
-        (S·B, 1, H, W), warped by T_{f←0}. Scale 0 only: the full-resolution depth is the one
-        evaluated, and the coarser scales, upsampled to that size, would repeat the same constraint
-        at less detail for one more projection each."""
+        (S·B, 1, H, W), warped by T_{f←0}; → (loss, None) in the one_way form. In the sc_depth form
+        (SC-Depth as published) the loss is the mean of that direction and the reverse one (each
+        source's depth moved into the target by T_{0←f}), and the second value is the self-discovered
+        mask 1 − D_diff of each source (B, S, H, W), detached, for the photometric error. Scale 0
+        only: the full-resolution depth is the one evaluated, and the coarser scales, upsampled to
+        that size, would repeat the same constraint at less detail for one more projection each."""
         m = self.config.model
         sources = m.frame_ids[1:]
         depth, source_depth = (disp_to_depth(d.float(), m.min_depth, m.max_depth)[1] for d in (disp, source_disp))
-        return depth_consistency_loss(
-            depth.repeat(len(sources), 1, 1, 1),
-            source_depth,
-            torch.cat([poses[f] for f in sources]),
-            scale_intrinsics(K_norm, m.height, m.width).repeat(len(sources), 1, 1),
-        )
+        depth = depth.repeat(len(sources), 1, 1, 1)
+        T = torch.cat([poses[f] for f in sources])
+        K = scale_intrinsics(K_norm, m.height, m.width).repeat(len(sources), 1, 1)
+        diff, inside = depth_difference(depth, source_depth, T, K)
+        loss = diff.sum() / inside.sum().clamp(min=1)
+        if self.config.loss.depth_consistency_form == "one_way":
+            return loss, None
+        reverse = depth_consistency_loss(source_depth, depth, torch.linalg.inv(T), K)
+        mask = (1 - diff.detach()).view(len(sources), -1, *diff.shape[-2:]).transpose(0, 1)
+        return (loss + reverse) / 2, mask
 
     def _skip_synthesis(
         self, frames: torch.Tensor, K_norm: torch.Tensor, source_disp: torch.Tensor, T_skip: torch.Tensor
@@ -218,10 +229,17 @@ class PoseConsModel(nn.Module):
         return min_reprojection(reprojection, identity)[0].mean()
 
     def _view_synthesis_losses(
-        self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict, poses: dict[int, torch.Tensor]
+        self,
+        frames: torch.Tensor,
+        K_norm: torch.Tensor,
+        disps: dict,
+        poses: dict[int, torch.Tensor],
+        masks: torch.Tensor | None = None,
     ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
         """Min-reprojection with auto-masking plus smoothness, averaged over scales (SPEC §3–4);
-        also the full-scale auto-mask (B, H, W), True where a warped source won."""
+        also the full-scale auto-mask (B, H, W), True where a warped source won. ``masks`` (B, S, H, W):
+        weights of each source's reprojection error before the minimum (SC-Depth's self-discovered
+        mask, resized to each scale)."""
         m, lo = self.config.model, self.config.loss
         h, w = m.height, m.width
         target, sources = frames[:, 0], [frames[:, i] for i in range(1, frames.shape[1])]
@@ -244,6 +262,8 @@ class PoseConsModel(nn.Module):
                 ],
                 1,
             )
+            if masks is not None:
+                reproj = reproj * (masks if masks.shape[-2:] == size else F.interpolate(masks, size=size, mode="area"))
             if lo.automask and (identity is None or lo.v1_multiscale):
                 identity = torch.cat([photometric_error(src, tgt, lo.ssim_weight) for src in srcs], 1)
             per_pixel, keep = min_reprojection(reproj, identity if lo.automask else None)
