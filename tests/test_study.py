@@ -455,8 +455,8 @@ def test_jobs_run_side_by_side_in_worker_processes_and_pass_a_signal_on(tmp_path
 
 @pytest.mark.slow
 def test_an_rgbd_study_trains_on_one_stretch_and_scores_a_later_one_on_its_depth_images(tmp_path, capsys):
-    """data.rgbd: the sequence is prepared once with its later stretch held out; each run is scored on
-    that stretch's depth images (dense ground truth in the spec's range, no crop) and poses, with the
+    """data.rgbd: the sequence is prepared once with its later stretch held out; each run (in worker
+    processes, which get --data-path as well) is scored on that stretch's depth images (dense ground truth in the spec's range, no crop) and poses, with the
     depth after the test-time stabiliser too, and the report says so."""
     import numpy as np
 
@@ -470,8 +470,8 @@ def test_an_rgbd_study_trains_on_one_stretch_and_scores_a_later_one_on_its_depth
     overrides = ["model.height=64", "model.width=128", "model.frame_ids=[0,-1,1]", "data.split=custom"]
     spec = write_spec(tmp_path / "rgbd.yaml", overrides=overrides + TINY[1:], data={"rgbd": rgbd}, stabilise=True)
     out = tmp_path / "study"
-    argv = ["study", "--spec", str(spec), "--out", str(out), "--data-path", str(source), "--quiet"]
-    assert main([*argv, "--accelerator", "cpu"]) == 0
+    argv = ["study", "--spec", str(spec), "--out", str(out), "--data-path", str(source), "--quiet", "--jobs", "2"]
+    assert main([*argv, "--accelerator", "cpu"]) == 0  # the workers get the sequence's folder too
     cyc = json.loads((out / "results" / "cyc_seed0.json").read_text())
     assert cyc["test_lines"] == [f"custom/custom_drive_0001_sync {k} l" for k in range(6)]  # source frames 8–13
     for key in ("frame", "frame_stabilised"):

@@ -374,11 +374,10 @@ def _run_side_by_side(
             log = open(run_dir / "study.log", "a")  # noqa: SIM115 (closed when the run ends)
             command = [sys.executable, "-m", "posecons.study.worker", str(spec.file), str(out), variant, str(seed)]
             command += ["--accelerator", accelerator]
-            command += [
-                f"--{arg}-path={spec.data[k]}"
-                for arg, k in (("data", "path"), ("odometry", "odometry"))
-                if k in spec.data
-            ]
+            # The data roots as the spec resolved them (--data-path and --odometry-path included).
+            data_path = spec.data.get("path") or spec.data.get("rgbd", {}).get("input")
+            command += [f"--data-path={data_path}"] if data_path else []
+            command += [f"--odometry-path={spec.data['odometry']}"] if "odometry" in spec.data else []
             env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
             proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
             unsignalled[variant, seed], started = proc, time.monotonic()
