@@ -17,7 +17,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .config import Config
-from .geometry import check_tensor, disp_to_depth, pose_vec_to_mat, scale_intrinsics, warp
+from .geometry import check_tensor, disp_to_depth, invert_pose, pose_vec_to_mat, scale_intrinsics, warp
 from .losses import (
     cycle_loss,
     depth_consistency_loss,
@@ -207,7 +207,7 @@ class PoseConsModel(nn.Module):
         loss = diff.sum() / inside.sum().clamp(min=1)
         if self.config.loss.depth_consistency_form == "one_way":
             return loss, None
-        reverse = depth_consistency_loss(source_depth, depth, torch.linalg.inv(T), K)
+        reverse = depth_consistency_loss(source_depth, depth, invert_pose(T), K)
         mask = (1 - diff.detach()).view(len(sources), -1, *diff.shape[-2:]).transpose(0, 1)
         return (loss + reverse) / 2, mask
 
