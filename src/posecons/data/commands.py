@@ -275,24 +275,20 @@ def _prepare(args: argparse.Namespace) -> int:
 
 def _prepare_rgbd(args: argparse.Namespace) -> int:
     from .calib import read_intrinsics
-    from .rgbd import INVALID_DEPTH, prepare_rgbd
+    from .rgbd import INVALID_DEPTH, RGBDSource, prepare_rgbd
 
     k = _pixel_intrinsics(args, "--calib FILE")
     if k is not None and args.calib is not None:
         raise PoseconsError("give one of --fx --fy --cx --cy and --calib, not both")
     if k is None and args.calib is None:
         raise PoseconsError("give the colour frames' intrinsics: --fx --fy --cx --cy (pixels) or --calib FILE")
+    source = RGBDSource(args.input, args.color, args.depth, args.poses, args.tum_poses, args.max_time_difference)
     info = prepare_rgbd(
-        args.input,
+        source,
         args.out,
         read_intrinsics(args.calib) if k is None else k,
-        args.color,
-        args.depth,
         args.depth_scale,
         INVALID_DEPTH if args.invalid_depth is None else args.invalid_depth,
-        args.poses,
-        args.tum_poses,
-        args.max_time_difference,
         args.every,
         args.test_from,
         args.gap,

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
@@ -121,79 +122,78 @@ def _nearest(names: Sequence[str], stamps: np.ndarray, max_difference: float, mi
     return found
 
 
-def read_rgbd_frames(
-    root: Path,
-    color: str,
-    depth: str,
-    poses: Optional[str] = None,
-    tum_poses: Optional[Path] = None,
-    max_time_difference: Optional[float] = None,
-    every: int = 1,
-) -> tuple[list[Path], list[Path], Optional[np.ndarray]]:
-    """Every ``every``-th colour frame of the sequence and its depth image and (N, 4, 4) camera → world
-    pose (None without ``poses`` and ``tum_poses``): (colour files, depth files, poses), all checked to
-    exist, the poses to be rigid."""
-    root = Path(root)
-    if not root.is_dir():
-        raise PoseconsError(f"{root}: input folder not found")
-    for pattern, option in ((color, "--color"), (depth, "--depth"), (poses, "--poses")):
-        if pattern is not None:
-            _check_pattern(pattern, option)
-    frames = _names(root, color)
-    if not frames:
-        raise PoseconsError(f"{root / color}: no colour frames (--color)")
-    try:
-        names = sorted(frames, key=float)
-    except ValueError:
-        names = sorted(frames)
-    names = names[::every]
-    colors = [frames[name] for name in names]
-    depths = _partners(root, frames, names, depth, "--depth", "depth image", max_time_difference)
-    if poses is not None:
-        files = _partners(root, frames, names, poses, "--poses", "pose file", max_time_difference)
-        return colors, depths, np.stack([read_pose_matrix(f) for f in files])
-    if tum_poses is None:
-        return colors, depths, None
-    stamps, trajectory = read_tum(tum_poses)
-    when = f"within {max_time_difference:g} s of" if max_time_difference else "at"
-    found = _nearest(
-        names,
-        stamps,
-        max_time_difference or 0.0,
-        lambda name: f"{tum_poses}: no pose {when} the time of {frames[name]}",
-    )
-    for index in found:
-        check_rigid(trajectory[index], f"{tum_poses} (t = {stamps[index]:.6f})")
-    return colors, depths, trajectory[found]
+@dataclass(frozen=True)
+class RGBDSource:
+    """Where a sequence's files are (module doc): its folder, the patterns of its colour frames, depth
+    images and per-frame pose files, or a TUM trajectory file, and how names pair them."""
+
+    root: Path
+    color: str
+    depth: str
+    poses: Optional[str] = None
+    tum_poses: Optional[Path] = None
+    max_time_difference: Optional[float] = None
+
+    def frames(self, every: int = 1) -> tuple[list[Path], list[Path], Optional[np.ndarray]]:
+        """Every ``every``-th colour frame and its depth image and (N, 4, 4) camera → world pose (None
+        without ``poses`` and ``tum_poses``): (colour files, depth files, poses), all checked to exist,
+        the poses to be rigid."""
+        root = Path(self.root)
+        if not root.is_dir():
+            raise PoseconsError(f"{root}: input folder not found")
+        for pattern, option in ((self.color, "--color"), (self.depth, "--depth"), (self.poses, "--poses")):
+            if pattern is not None:
+                _check_pattern(pattern, option)
+        frames = _names(root, self.color)
+        if not frames:
+            raise PoseconsError(f"{root / self.color}: no colour frames (--color)")
+        try:
+            names = sorted(frames, key=float)
+        except ValueError:
+            names = sorted(frames)
+        names = names[::every]
+        colors = [frames[name] for name in names]
+        depths = _partners(root, frames, names, self.depth, "--depth", "depth image", self.max_time_difference)
+        if self.poses is not None:
+            files = _partners(root, frames, names, self.poses, "--poses", "pose file", self.max_time_difference)
+            return colors, depths, np.stack([read_pose_matrix(f) for f in files])
+        if self.tum_poses is None:
+            return colors, depths, None
+        stamps, trajectory = read_tum(self.tum_poses)
+        when = f"within {self.max_time_difference:g} s of" if self.max_time_difference else "at"
+        found = _nearest(
+            names,
+            stamps,
+            self.max_time_difference or 0.0,
+            lambda name: f"{self.tum_poses}: no pose {when} the time of {frames[name]}",
+        )
+        for index in found:
+            check_rigid(trajectory[index], f"{self.tum_poses} (t = {stamps[index]:.6f})")
+        return colors, depths, trajectory[found]
 
 
 def prepare_rgbd(
-    root: Path,
+    source: RGBDSource,
     out: Path,
     intrinsics: np.ndarray,
-    color: str,
-    depth: str,
     depth_scale: float,
     invalid_depth: Sequence[float] = INVALID_DEPTH,
-    poses: Optional[str] = None,
-    tum_poses: Optional[Path] = None,
-    max_time_difference: Optional[float] = None,
     every: int = 1,
     test_from: Optional[int] = None,
     gap: int = 20,
     val_fraction: float = 0.1,
     seed: int = 0,
 ) -> dict:
-    """Write the dataset of the sequence in ``root`` (module doc; files as :func:`read_rgbd_frames`
-    finds them); ``intrinsics`` is the (3, 3) pixel K of the colour frames, ``depth_scale`` the depth
+    """Write the dataset of the sequence ``source`` (module doc); ``intrinsics`` is the (3, 3) pixel K of the colour frames, ``depth_scale`` the depth
     images' values per metre (1000: millimetres), ``invalid_depth`` the values that mean no measurement.
     ``test_from`` and ``gap`` count frames of the source sequence (before ``every``), as its names do.
     Returns the description also written to ``rgbd.json``."""
     if not (np.isfinite(depth_scale) and depth_scale > 0):
         raise PoseconsError(f"--depth-scale {depth_scale}: must be a number > 0 (depth image values per metre)")
     k = np.asarray(intrinsics, dtype=np.float64)
-    colors, depths, trajectory = read_rgbd_frames(root, color, depth, poses, tum_poses, max_time_difference, every)
-    stretches = _stretches(len(colors), every, test_from, gap, Path(root) / color)
+    colors, depths, trajectory = source.frames(every)
+    root = Path(source.root)
+    stretches = _stretches(len(colors), every, test_from, gap, root / source.color)
     kept = [i for stretch in stretches for i in stretch]
     folders, size, maps = [drive_folder(d) for d in range(len(stretches))], None, []
     with output_dir(out) as tmp:
@@ -232,12 +232,12 @@ def prepare_rgbd(
             (sequence / "calib.txt").write_text(format_calib({"P2": p2.ravel()}, calib_time=None))
             write_kitti_poses(tmp / "odometry" / "poses" / f"{SEQUENCE}.txt", trajectory[stretches[-1]])
         info = {
-            "source": str(Path(root).resolve()),
+            "source": str(root.resolve()),
             "frames": [colors[i].relative_to(root).as_posix() for i in kept],
             "depth_images": [depths[i].relative_to(root).as_posix() for i in kept],
-            "poses": poses or (str(tum_poses) if tum_poses else None),
+            "poses": source.poses or (str(source.tum_poses) if source.tum_poses else None),
             "every": every,
-            "max_time_difference": max_time_difference,
+            "max_time_difference": source.max_time_difference,
             "depth_scale": depth_scale,
             "invalid_depth": list(invalid_depth),
             "width": size[0],

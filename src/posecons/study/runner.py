@@ -202,19 +202,16 @@ def _prepare_rgbd(args: dict[str, Any], root: Path, stabilise: bool) -> StudyDat
     """The sequence through prepare-rgbd into ``root`` (once): its test stretch is the test split, with
     its depth images as ground truth and its poses as odometry sequence 00."""
     from ..data.calib import read_intrinsics
-    from ..data.rgbd import GT_FILE, SEQUENCE, prepare_rgbd
+    from ..data.rgbd import GT_FILE, SEQUENCE, RGBDSource, prepare_rgbd
 
     source = Path(args["input"])
     if not (root / "rgbd.json").is_file():
         print(f"[study] preparing the RGB-D sequence {source}", flush=True)
         prepare_rgbd(
-            source,
+            RGBDSource(source, args["color"], args["depth"], args["poses"]),
             root,
             read_intrinsics(source / args["calib"]),
-            args["color"],
-            args["depth"],
             args["depth_scale"],
-            poses=args["poses"],
             every=args["every"],
             test_from=args["test_from"],
             gap=args["gap"],
