@@ -223,7 +223,7 @@ def test_scale_multiplies_depth_and_translations(ckpt, frames_dir, base_run, tmp
     assert info["method"] == "given" and info["value"] == 2.5
 
 
-def test_stabilise_multiplies_each_depth_by_the_stabilisers_factor(ckpt, frames_dir, base_run, tmp_path):
+def test_stabilise_multiplies_each_depth_by_the_stabilisers_factor(ckpt, frames_dir, base_run, tmp_path, capsys):
     """predict --stabilise, streaming in batches of 2: each depth is the plain prediction × its factor,
     the factors are the stabiliser's on the whole sequence of network-size depths and pose-net steps
     with K at the network size, and the trajectory is untouched. Mutations checked: K at the input's
@@ -234,6 +234,7 @@ def test_stabilise_multiplies_each_depth_by_the_stabilisers_factor(ckpt, frames_
     out = tmp_path / "out"
     args = ["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet"]
     assert main(args + ["--batch-size", "2", "--stabilise", "--time-constant", "5", "--scale", "3"]) == 0
+    assert "--stabilise used KITTI's intrinsics" in capsys.readouterr().err  # no camera given: a guess
     factors = json.loads((out / "scale.json").read_text())["stabiliser"]["factors"]
     predictor = load_predictor(ckpt, "cpu")
     paths = sorted(frames_dir.iterdir())
@@ -434,7 +435,7 @@ def test_ply_has_one_vertex_per_valid_pixel(tmp_path, binary):
     np.testing.assert_array_equal(back_colors, image.reshape(-1, 3)[valid])
 
 
-def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path):
+def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path, capsys):
     out = tmp_path / "out"
     calib = _drive(synth, 1).parent / "calib_cam_to_cam.txt"  # P_rect_02 in pixels of these frames
     assert (
@@ -458,6 +459,7 @@ def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path):
         )
         == 0
     )
+    assert "warning" not in capsys.readouterr().err  # the camera's own K
     plys = sorted((out / "pointcloud").iterdir())
     assert [p.stem for p in plys] == ["0000000000", "0000000002", "0000000004"]
     points, colors = read_ply(plys[1])

@@ -94,9 +94,12 @@ def plot_scales_over_time(
     path: str | Path,
     count: int = 5,
     normalise: bool = False,
+    title: str | None = None,
+    ylabel: str | None = None,
 ) -> Path:
     """Scale against frame number for the ``count`` sequences with the largest σ/μ in the first run,
-    one colour per sequence and one line style per run (label → (N,) scales of the same N frames)."""
+    one colour per sequence and one line style per run (label → (N,) scales of the same N frames);
+    ``title`` and ``ylabel`` replace the defaults, which speak of per-frame scales."""
     arrays = _runs(runs, normalise)
     frames = np.asarray(frames)
     first = next(iter(arrays.values()))
@@ -116,9 +119,9 @@ def plot_scales_over_time(
                 label=f"{label + '  ' if label else ''}{short_name(name)}  σ/μ={own:.3f}",
             )
     ax.set_xlabel("frame")
-    ax.set_ylabel("scale / median scale of the run" if normalise else "median scale")
+    ax.set_ylabel(ylabel or ("scale / median scale of the run" if normalise else "median scale"))
     order = "" if len(arrays) == 1 else f" (of {next(iter(runs))})"
-    ax.set_title(f"Scale over time, the {min(count, len(cv))} least consistent sequences{order}")
+    ax.set_title(title or f"Scale over time, the {min(count, len(cv))} least consistent sequences{order}")
     ax.legend(fontsize=7)
     return _save(fig, path)
 
@@ -163,17 +166,17 @@ def plot_error_histogram(abs_rel: Sequence[float], path: str | Path, bins: int =
 
 
 def plot_trajectory_topview(
-    poses: np.ndarray, path: str | Path, gt: np.ndarray | None = None, label: str = "camera"
+    poses: np.ndarray, path: str | Path, gt: np.ndarray | None = None, label: str = "camera", metres: bool = False
 ) -> Path:
     """Top view (x right, z forward) of (N, 4, 4) camera → world poses, over (N, 4, 4) ground truth
-    (then in metres) when given."""
+    (then in metres) when given; ``metres``: the poses are in metres without it."""
     fig, ax = plt.subplots(figsize=(6, 6))
     if gt is not None:
         ax.plot(gt[:, 0, 3], gt[:, 2, 3], "k-", label="ground truth")
     ax.plot(poses[:, 0, 3], poses[:, 2, 3], "-", label=label)
     start = poses[0] if gt is None else gt[0]
     ax.plot(start[0, 3], start[2, 3], "ko", label="start")
-    unit = "" if gt is None else " [m]"
+    unit = " [m]" if metres or gt is not None else " [model units]"
     ax.set_xlabel(f"x{unit}")
     ax.set_ylabel(f"z{unit}")
     ax.set_aspect("equal", adjustable="datalim")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from ..cli import device_name, non_negative_float, output_file, output_folder, positive_float, positive_int
@@ -124,6 +125,22 @@ def predict_command(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     ).check()
     summary = predict(load_predictor(args.checkpoint, args.device), args.input, args.out, options)
+    uses_k = [
+        name
+        for name, on in (
+            ("--camera-height", args.camera_height),
+            ("--pointcloud", args.pointcloud),
+            ("--stabilise", args.stabilise),
+        )
+        if on
+    ]
+    if uses_k and not (args.intrinsics or args.calib):  # after the work: the last thing the user reads
+        print(
+            f"posecons predict: warning: {' and '.join(uses_k)} used KITTI's intrinsics (fx = 0.58 × width, "
+            "fy = 1.92 × height), as neither --intrinsics nor --calib was given: pass the camera's, e.g. "
+            "--calib DATA/custom/calib_cam_to_cam.txt from `posecons prepare`",
+            file=sys.stderr,
+        )
     print(f"{summary['frames']} frames → {args.out} (scale {summary['scale']:.6g}, {summary['seconds']:.1f} s)")
     return 0
 

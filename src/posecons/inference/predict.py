@@ -205,7 +205,9 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
             poses = global_from_relative(relative)
             write_kitti_poses(tmp / "trajectory_kitti.txt", poses)
             write_tum(tmp / "trajectory_tum.txt", poses, np.asarray(times))
-            plot_trajectory_topview(poses, tmp / "trajectory.png")
+            plot_trajectory_topview(
+                poses, tmp / "trajectory.png", metres=result.method in ("ground_truth", "camera_height")
+            )
             outputs += ["trajectory_kitti.txt", "trajectory_tum.txt", "trajectory.png"]
 
         scale_info = result.to_dict()
@@ -213,7 +215,12 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
             scale_info["stabiliser"] = {"time_constant": options.time_constant, "factors": factors}
             frames = np.arange(len(factors))
             plot_scales_over_time(
-                {"stabiliser factor": factors}, ["input"] * len(frames), frames, tmp / "stabiliser.png"
+                {"": factors},
+                ["input"] * len(frames),
+                frames,
+                tmp / "stabiliser.png",
+                title="The stabiliser's factor on each frame's depth",
+                ylabel="factor",
             )
             outputs.append("stabiliser.png")
         if drift:
