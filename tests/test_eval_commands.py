@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from posecons.cli import main
 from posecons.data.trajectory_io import read_kitti_poses, read_tum, write_kitti_poses
@@ -270,3 +271,37 @@ def test_compare_bolds_the_best(tmp_path, capsys):
     )
     assert capsys.readouterr().out.splitlines() == table
     assert main(["compare", str(tmp_path / "base.json"), "--names", "a", "b"]) == 2
+
+
+def test_evaluate_depth_plots_the_best_median_and_worst_frame_beside_its_ground_truth(tmp_path, monkeypatch):
+    """Four dense frames whose predictions are 2 × GT with relative noise 0.3, 0, 0.2 and 0.1: with
+    --data-path, examples.png shows frames 1 (best), 2 (the median of the ranking 1, 3, 2, 0) and 0
+    (worst), each with its own image and GT and the prediction times its frame scale. Caught: picks in
+    split order, the unscaled prediction, another frame's image."""
+    from posecons.evaluation import evaluate
+
+    rng = np.random.default_rng(0)
+    folder = tmp_path / "data" / "custom" / "custom_drive_0000_sync" / "image_02" / "data"
+    folder.mkdir(parents=True)
+    gts, disps, images = [], [], []
+    for i, noise in enumerate((0.3, 0.0, 0.2, 0.1)):
+        gt = rng.uniform(1.0, 5.0, (24, 32))
+        gts.append(gt)
+        disps.append(1 / (2 * gt * (1 + noise * rng.choice([-1.0, 1.0], gt.shape))))
+        images.append(rng.integers(0, 256, (24, 32, 3), dtype=np.uint8))
+        Image.fromarray(images[-1]).save(folder / f"{i:010d}.png")
+    _write_gt(tmp_path / "gt.npz", gts, [f"custom/custom_drive_0000_sync {i} l" for i in range(4)])
+    np.save(tmp_path / "pred.npy", np.stack(disps).astype(np.float32))
+    shown = []
+    plot = evaluate.plot_depth_examples
+    monkeypatch.setattr(evaluate, "plot_depth_examples", lambda rows, path: shown.extend(rows) or plot(rows, path))
+    argv = ["evaluate-depth", "--pred-disps", str(tmp_path / "pred.npy"), "--gt", str(tmp_path / "gt.npz")]
+    argv += ["--gt-kind", "dense", "--max-depth", "10", "--data-path", str(tmp_path / "data")]
+    assert main([*argv, "--plots", str(tmp_path / "plots")]) == 0
+    assert [row["title"].split(":")[0] for row in shown] == [f"custom/custom_drive_0000_sync {i} l" for i in (1, 2, 0)]
+    for row, i in zip(shown, (1, 2, 0)):
+        pred = 1 / np.float32(disps[i]).astype(np.float64)
+        np.testing.assert_array_equal(row["image"], images[i])
+        np.testing.assert_allclose(row["gt"], gts[i], rtol=1e-6)
+        np.testing.assert_allclose(row["pred"], pred * np.median(gts[i]) / np.median(pred), rtol=1e-5)
+    assert (tmp_path / "plots" / "examples.png").stat().st_size > 1000

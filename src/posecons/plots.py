@@ -1,7 +1,7 @@
 """Every figure of the package (PNG files, matplotlib Agg): evaluation (frame scales per sequence,
 scale over time for the least consistent sequences as in the paper's Figure 1, for one run or
 several side by side, the per-frame abs rel histogram), studies (paired differences), training (validation curves), prediction (colour-mapped disparity, scale drift) and the
-top view of a trajectory. Nothing else in the package imports matplotlib."""
+top view of a trajectory, examples of depth beside its ground truth. Nothing else in the package imports matplotlib."""
 
 from __future__ import annotations
 
@@ -215,6 +215,25 @@ def colorize(disparity: np.ndarray, cmap: str = COLORMAP, limits: tuple[float, f
     lo, hi = limits or colour_range(disparity)
     norm = np.clip((disparity - lo) / max(hi - lo, 1e-12), 0, 1)
     return (matplotlib.colormaps[cmap](norm)[..., :3] * 255).astype(np.uint8)
+
+
+def plot_depth_examples(rows: Sequence[dict], path: str | Path) -> Path:
+    """One row per frame: its image, the ground-truth depth and the scaled prediction, both drawn as
+    inverse depth over the ground truth's colour range, so that a colour means one depth in both
+    (black: no ground truth). ``rows``: dicts with ``title``, ``image`` ((H, W, 3) uint8), ``gt``
+    ((H, W) metres, 0 where there is none) and ``pred`` ((H, W) metres)."""
+    height, width = rows[0]["gt"].shape
+    fig, axes = plt.subplots(len(rows), 3, figsize=(10, 10 / 3 * height / width * len(rows) + 0.4), squeeze=False)
+    for ax_row, row in zip(axes, rows):
+        valid = row["gt"] > 0
+        limits = colour_range(1.0 / row["gt"][valid])
+        gt = np.where(valid[..., None], colorize(1.0 / np.where(valid, row["gt"], 1.0), limits=limits), 0)
+        panels = (row["image"], gt, colorize(1.0 / row["pred"], limits=limits))
+        for ax, image, name in zip(ax_row, panels, (row["title"], "ground truth", "prediction (scaled)")):
+            ax.imshow(image)
+            ax.set_title(name, fontsize=8)
+            ax.set_axis_off()
+    return _save(fig, path)
 
 
 def plot_scale_drift(

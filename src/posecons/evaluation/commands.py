@@ -77,7 +77,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--save-disps", type=output_file, metavar="OUT.npy", help="save the model's disparities")
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
-    p.add_argument("--plots", type=output_folder, metavar="DIR", help="write scale and error plots (PNG)")
+    p.add_argument(
+        "--plots",
+        type=output_folder,
+        metavar="DIR",
+        help="write scale and error plots (PNG); with --data-path also examples.png, the best, median and "
+        "worst frame beside its ground truth",
+    )
     p.set_defaults(func=evaluate_depth_command)
 
     p = subparsers.add_parser(
@@ -235,6 +241,8 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
         write_json(args.json, result)
     if args.plots:
         evaluate.write_depth_plots(result, split, args.plots)
+        if args.data_path is not None:  # the images are there: three frames beside their ground truth
+            evaluate.write_depth_examples(result, disps, gts, split, args.data_path, args.plots)
     return 0
 
 

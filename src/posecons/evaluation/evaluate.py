@@ -15,6 +15,7 @@ import torch
 
 from ..data.calib import normalised_to_pixel, raw_intrinsics
 from ..data.gt import load_gt
+from ..data.images import load_rgb
 from ..data.kitti_odometry import list_sequence_frames
 from ..data.kitti_raw import split_image_paths
 from ..data.splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
@@ -23,9 +24,22 @@ from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
 from ..inference.media import frames_from_paths
 from ..inference.stabilise import DEFAULT_TIME_CONSTANT, stabilise
-from ..metrics.depth import CROP_FOR_GT_KIND, depth_metrics
+from ..metrics.depth import (
+    CROP_FOR_GT_KIND,
+    MAX_DEPTH,
+    MIN_DEPTH,
+    depth_metrics,
+    resize_disparity,
+    scale_factors,
+)
 from ..metrics.pose import align_trajectory, global_from_relative, pose_metrics
-from ..plots import plot_error_histogram, plot_scale_boxplot, plot_scale_over_time, plot_trajectory_topview
+from ..plots import (
+    plot_depth_examples,
+    plot_error_histogram,
+    plot_scale_boxplot,
+    plot_scale_over_time,
+    plot_trajectory_topview,
+)
 
 
 def model_disparities(
@@ -204,6 +218,34 @@ def write_depth_plots(result: dict, lines: Sequence[SplitLine], out_dir: Path) -
     plot_scale_boxplot(result["scales"], seqs, out_dir / "scale_boxplot.png")
     plot_scale_over_time(result["scales"], seqs, frames, out_dir / "scale_over_time.png")
     plot_error_histogram(result["per_frame_abs_rel"], out_dir / "abs_rel_histogram.png")
+
+
+def write_depth_examples(
+    result: dict,
+    disps: np.ndarray,
+    gts: Sequence[np.ndarray],
+    lines: Sequence[SplitLine],
+    data_path: str | Path,
+    out_dir: Path,
+) -> None:
+    """``examples.png``: the evaluated frames of lowest, median and highest abs rel, each as its image,
+    its ground truth and the prediction with the result's scaling (clamped to its depth range)."""
+    abs_rel = np.asarray(result["per_frame_abs_rel"])
+    ranked = [int(i) for i in np.argsort(np.nan_to_num(abs_rel, nan=np.inf)) if np.isfinite(abs_rel[i])]
+    picks = list(dict.fromkeys((ranked[0], ranked[len(ranked) // 2], ranked[-1])))
+    factors = scale_factors(
+        np.asarray(result["scales"]), [s.folder for s in lines], result["scaling"], result["scale_factor"]
+    )
+    paths = split_image_paths(data_path, [lines[i] for i in picks])
+    rows = []
+    for i, path in zip(picks, paths):
+        gt = np.asarray(gts[i], dtype=np.float32)
+        pred = np.clip(
+            factors[i] / resize_disparity(disps[i], *gt.shape), *(result["depth_range"] or (MIN_DEPTH, MAX_DEPTH))
+        )
+        title = f"{lines[i]}: abs rel {abs_rel[i]:.3f}"
+        rows.append({"title": title, "image": np.asarray(load_rgb(path)), "gt": gt, "pred": pred})
+    plot_depth_examples(rows, out_dir / "examples.png")
 
 
 def write_trajectories(out_dir: Path, estimate: np.ndarray, gt: np.ndarray, times: np.ndarray | None = None) -> None:
