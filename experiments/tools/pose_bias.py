@@ -1,5 +1,7 @@
 """How a checkpoint's pose net moves on a test sequence: whether its translation follows the true
-motion (correlation of |t| with the true distance, cosine with the true direction) and whether its
+motion (correlation of |t| with the true distance, cosine with the true direction), whether its
+rotation does (correlation of the angle with the true angle, their mean ratio, cosine of the axes:
+what hand-held, rotation-heavy motion tests), and whether its
 mirror-odd outputs — sideways translation t_x, yaw and roll — flip sign for mirrored frames, as they
 must for a horizontally symmetric world. A pose net that outputs the same t_x for a pair and for its
 mirror image has learnt a constant bias, not motion (docs/results.md). For the depth net: the mean
@@ -19,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.trajectory_io import read_kitti_poses
@@ -34,7 +37,8 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
     frames = frames_from_paths(list_sequence_frames(odometry, sequence))
     images = torch.from_numpy(np.concatenate([x for _, x, _ in predict_batches(predictor, frames, 32, depth=False)]))
     gt = read_kitti_poses(odometry / "poses" / f"{int(sequence):02d}.txt")
-    true = (np.linalg.inv(gt[stride:]) @ gt[:-stride])[:, :3, 3]  # t of T_{i+s←i}
+    relative = np.linalg.inv(gt[stride:]) @ gt[:-stride]  # T_{i+s←i}
+    true, true_rot = relative[:, :3, 3], Rotation.from_matrix(relative[:, :3, :3]).as_rotvec()
     a, b = images[:-stride], images[stride:]
     with torch.no_grad():
         rot, t = (x[:, 0].double().numpy() for x in predictor.model.pose_net(a, b))
@@ -42,6 +46,7 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
         disp = predictor.model.depth_net(images)[0]
         disp_m = predictor.model.depth_net(images.flip(-1))[0].flip(-1)
     norm = np.linalg.norm(t, axis=1)
+    angle, true_angle = np.linalg.norm(rot, axis=1), np.linalg.norm(true_rot, axis=1)
     cycle = cycle_terms(predictor.model.pose_net, images, gt, stride)
     half = disp.shape[-1] // 2
     return {
@@ -49,6 +54,9 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
         "cos_direction": float(np.mean((t * true).sum(1) / norm / np.linalg.norm(true, axis=1))),
         "tx_over_t": float(np.mean(t[:, 0] / norm)),
         "tx_over_t_mirrored": float(np.mean(t_m[:, 0] / np.linalg.norm(t_m, axis=1))),
+        "corr_angle": float(np.corrcoef(angle, true_angle)[0, 1]),
+        "angle_over_true": float(angle.mean() / true_angle.mean()),
+        "cos_axis": float(np.mean((rot * true_rot).sum(1) / angle / true_angle)),
         "yaw_mrad": 1e3 * float(rot[:, 1].mean()),
         "yaw_mrad_mirrored": 1e3 * float(rot_m[:, 1].mean()),
         "disp_left": float(disp[..., :half].mean()),
