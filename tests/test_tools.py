@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from posecons.checkpoint import load_checkpoint
@@ -95,3 +96,31 @@ def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_p
     )
     assert result.returncode == 2 and "does not reproduce" in result.stderr and "ate_full_rmse" in result.stderr
     assert not (out / "results" / "cyc_seed3.json").exists()
+
+
+def test_camera_height_scales_each_drive_by_its_road_plane(tmp_path):
+    """Two drives whose predictions are the true road-plane depth × 2 and × 0.5, at a quarter of the
+    ground truth's size: each drive's factor is the inverse (the fitted heights' ratio). Caught: the
+    ratio inverted, the ground truth's K used for the smaller prediction, one factor for all drives."""
+    from posecons.data.calib import format_calib, normalised_to_pixel, raw_intrinsics
+    from posecons.data.splits import SplitLine
+    from posecons.data.synth.rig import Rig
+
+    load = importlib.util.spec_from_file_location("camera_height", TOOLS / "camera_height.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    (tmp_path / "2011_09_26").mkdir()
+    (tmp_path / "2011_09_26" / "calib_cam_to_cam.txt").write_text(format_calib(Rig(384, 128).cam_to_cam_text()))
+    k = raw_intrinsics(tmp_path / "2011_09_26", 2)
+
+    def road(height: int, width: int) -> np.ndarray:
+        fy, cy = normalised_to_pixel(k, height, width)[1, 1:]
+        rows = np.arange(height)[:, None]
+        depth = np.where(rows > cy + 1, 1.65 * fy / np.maximum(rows - cy, 1e-9), 80.0)
+        return np.broadcast_to(depth, (height, width)).astype(np.float32)
+
+    lines = [SplitLine(f"2011_09_26/d{d}", f, "l") for d in (0, 1) for f in range(3)]
+    gts = [road(128, 384)] * 6
+    disps = np.stack([1 / (road(32, 96) * (2.0 if line.folder.endswith("0") else 0.5)) for line in lines])
+    factors = tool.drive_scales(disps, gts, lines, tmp_path, frames=2)
+    np.testing.assert_allclose(factors, [0.5] * 3 + [2.0] * 3, rtol=2e-3)
