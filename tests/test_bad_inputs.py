@@ -44,6 +44,7 @@ STUDY_SPECS = {  # spec file name → what differs from STUDY_SPEC
     "study_bad_variant": {"variants": {"a": [], "b": ["loss.constraints=[xyz]"]}},
     "study_bad_synth": {"data": {"synth": {**STUDY_SPEC["data"]["synth"], "drives": 1}}},
     "study_two_data": {"data": {**STUDY_SPEC["data"], "path": "/data/kitti_raw"}},
+    "study_bad_profile": {"data": {"synth": {**STUDY_SPEC["data"]["synth"], "profile": "city"}}},
 }
 
 
@@ -150,6 +151,7 @@ CASES = [
         ["userdir", "posecons did not write"],
     ),
     ("synth-drives-0", "synth --out {out} --drives 0", ["--drives", "≥ 1"]),
+    ("synth-profile", "synth --out {out} --profile city", ["--profile", "invalid choice: 'city'"]),
     ("synth-one-drive", "synth --out {out} --drives 1 --frames 5 --width 32 --height 16", ["at least 2 drives"]),
     ("synth-frames-word", "synth --out {out} --frames many", ["--frames", "expected an integer"]),
     ("synth-width-0", "synth --out {out} --width 0", ["--width", "≥ 1"]),
@@ -492,6 +494,11 @@ CASES = [
         "study-spec-bad-synth",
         "study --spec {in}/study_bad_synth.yaml --out {out}",
         ["study_bad_synth.yaml", "at least 2 drives"],
+    ),
+    (
+        "study-spec-bad-profile",
+        "study --spec {in}/study_bad_profile.yaml --out {out}",
+        ["study_bad_profile.yaml", "unknown --profile 'city'; known: street, open"],
     ),
     (
         "study-spec-two-data",

@@ -230,3 +230,32 @@ def test_training_frames_are_decoded_and_resized_as_evaluation_does(tmp_path: Pa
     predictor.height, predictor.width = 96, 320
     ((_, images, _),) = predict_batches(predictor, frames_from_paths([drive / "0000000001.jpg"]), 1, depth=False)
     assert torch.equal(sample["frames"][0], torch.from_numpy(images[0]))
+
+
+def test_the_open_profile_varies_speed_turns_and_scene_depth_more_than_the_street():
+    """Eight drives of each profile, read from the generator's own trajectory and scene: the open
+    profile's speeds leave the street's 0.5–1.5 m range, its turns are sharper than the street's
+    0.035 /m, and its façades stand further from the road, over a wider range. Caught: the profile not
+    reaching the trajectory, the scene, or either (then both profiles draw the same drives)."""
+    from posecons.data.synth.motion import extended_path
+    from posecons.data.synth.primitives import Box
+    from posecons.data.synth.scene import FACADE
+
+    def stats(profile: str) -> tuple[np.ndarray, float, np.ndarray]:
+        speeds, turns, setbacks = [], [], []
+        for index in range(8):
+            drive = make_drive(SEED, index, 100, profile)
+            speed, yaw = drive.trajectory.speed, np.unwrap(drive.trajectory.rpy[:, 2])
+            moving = speed[:-1] > 0.05
+            speeds.append(speed[speed > 0])
+            turns.append(np.abs(np.diff(yaw)[moving] / speed[:-1][moving]).max())
+            track = extended_path(drive.trajectory)[0]  # the path the street is laid along
+            for prim in drive.prims:
+                if isinstance(prim, Box) and prim.material == FACADE:
+                    setbacks.append(np.linalg.norm(track - prim.center[:2], axis=1).min() - prim.half[1])
+        return np.concatenate(speeds), max(turns), np.array(setbacks)
+
+    street, open_ = stats("street"), stats("open")
+    assert open_[0].max() > 1.6 and street[0].max() <= 1.5 + 1e-9
+    assert open_[1] > 0.04 > street[1]
+    assert np.median(open_[2]) > np.median(street[2]) + 3 and np.ptp(open_[2]) > 2 * np.ptp(street[2])

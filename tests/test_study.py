@@ -371,6 +371,10 @@ def test_spec_checks_and_bundled_specs(tmp_path):
     scdepth = load_spec(EXPERIMENTS / "synth_scdepth.yaml")
     assert scdepth.data == short.data and scdepth.config("cyc", 1) == short.config("cyc", 1)
     assert scdepth.config("sc05_cyc", 1).loss.depth_consistency_form == "sc_depth"
+    # synth_open is synth_fast's recipe on the second benchmark: other data, the same runs' configs.
+    second = load_spec(EXPERIMENTS / "synth_open.yaml")
+    assert second.data["synth"] == {**short.data["synth"], "profile": "open"}
+    assert all(second.config(v, 2) == short.config(v, 2) for v in second.variants)
     ema = load_spec(EXPERIMENTS / "synth_ema.yaml")
     assert ema.config("baseline_ema", 0).train.ema_decay == 0.99
     assert ema.config("baseline_ema", 0).loss == synth.config("baseline", 0).loss

@@ -49,6 +49,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=1,
         help="training lines need frames ±N (for model.frame_ids [0, -N, N])",
     )
+    p.add_argument(
+        "--profile",
+        choices=("street", "open"),
+        default="street",
+        help="scene statistics: street (the studies' benchmark) or open (a second benchmark: speed "
+        "0.3–2 m a frame, sharper turns, façades 6–30 m away, more open lots)",
+    )
     p.set_defaults(func=_synth)
 
     p = subparsers.add_parser("export-gt", help="export the ground-truth depth of a split to .npz")
@@ -203,11 +210,20 @@ def _synth(args: argparse.Namespace) -> int:
     from .synth import generate_synth
 
     info = generate_synth(
-        args.out, args.drives, args.frames, args.seed, args.ext, args.width, args.height, args.workers, args.neighbours
+        args.out,
+        args.drives,
+        args.frames,
+        args.seed,
+        args.ext,
+        args.width,
+        args.height,
+        args.workers,
+        args.neighbours,
+        args.profile,
     )
     lines = len(read_split(args.out / "splits" / "synth" / "train_files.txt"))
     print(
-        f"wrote {len(info['drives'])} drives × {args.frames} frames to {args.out} "
+        f"wrote {len(info['drives'])} {args.profile} drives × {args.frames} frames to {args.out} "
         f"(test: {', '.join(info['test_drives'])}); {lines} training lines with frames ±{args.neighbours}: "
         f"enough for train.batch_size ≤ {lines} and model.frame_ids within ±{args.neighbours}"
     )

@@ -42,7 +42,8 @@ from ..config import STUDY_SPECS, Config, load_config, resolve_preset
 from ..errors import PoseconsError
 
 KEYS = {"preset", "overrides", "data", "seeds", "variants", "threads", "stabilise"}
-SYNTH_ARGS = ("drives", "frames", "width", "height", "neighbours", "seed", "ext")  # generate_synth's; ext optional
+SYNTH_ARGS = ("drives", "frames", "width", "height", "neighbours", "seed", "ext", "profile")  # generate_synth's
+OPTIONAL_SYNTH_ARGS = ("ext", "profile")
 PATH_KEYS = {"path", "test_split", "odometry", "odometry_sequences"}
 RGBD_TEXTS = ("color", "depth", "poses", "calib")  # prepare-rgbd's patterns and calibration file, required
 RGBD_NUMBERS = {"depth_scale": None, "every": 1, "test_from": None, "gap": 20, "min_depth": 0.1, "max_depth": None}
@@ -143,17 +144,20 @@ def _synth_data(args: Any) -> dict[str, Any]:
     unknown = sorted(set(args) - set(SYNTH_ARGS))
     if unknown:
         raise PoseconsError(f"data.synth: unknown key {unknown[0]!r}; known: {list(SYNTH_ARGS)}")
-    missing = [key for key in SYNTH_ARGS[:-1] if key not in args]
+    required = [key for key in SYNTH_ARGS if key not in OPTIONAL_SYNTH_ARGS]
+    missing = [key for key in required if key not in args]
     if missing:
-        raise PoseconsError(f"data.synth: missing key {missing[0]!r} (give {', '.join(SYNTH_ARGS[:-1])})")
+        raise PoseconsError(f"data.synth: missing key {missing[0]!r} (give {', '.join(required)})")
     merged = {"ext": "png", **args}
     for key, value in merged.items():
-        kind = str if key == "ext" else int
+        kind = str if key in OPTIONAL_SYNTH_ARGS else int
         if not isinstance(value, kind) or isinstance(value, bool) or (kind is int and value < 0):
             raise PoseconsError(
                 f"data.synth.{key} must be {'a word' if kind is str else 'an integer ≥ 0'}, got {value!r}"
             )
     check_synth_args(**{k: v for k, v in merged.items() if k != "seed"})
+    if merged.get("profile") == "street":  # the default: spelt out or not, the same data (and study.json)
+        del merged["profile"]
     return {"synth": merged}
 
 

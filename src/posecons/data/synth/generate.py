@@ -34,6 +34,7 @@ from ..splits import SplitLine, write_split
 from ..trajectory_io import write_kitti_poses
 from .motion import Trajectory, extended_path, make_trajectory
 from .primitives import Primitive
+from .profile import PROFILES
 from .render import Lidar, Shading, render_camera, shading_tables
 from .rig import IMU_TO_VELO, KITTI_SIZE, VELO_TO_CAM, Rig
 from .scene import build_scene, make_textures
@@ -65,11 +66,11 @@ class Drive:
         return self.trajectory.imu_poses[frame] @ np.linalg.inv(rig.m_velo_imu)
 
 
-def make_drive(seed: int, index: int, frames: int) -> Drive:
-    """The trajectory and street of drive ``index`` of a dataset generated with ``seed``."""
+def make_drive(seed: int, index: int, frames: int, profile: str = "street") -> Drive:
+    """The trajectory and street of drive ``index`` of a dataset generated with ``seed`` and ``profile``."""
     rng = np.random.default_rng([seed, index])
-    trajectory = make_trajectory(rng, frames)
-    return Drive(trajectory, build_scene(rng, *extended_path(trajectory)))
+    trajectory = make_trajectory(rng, frames, PROFILES[profile])
+    return Drive(trajectory, build_scene(rng, *extended_path(trajectory), PROFILES[profile]))
 
 
 def lidar_for_width(width: int) -> Lidar:
@@ -162,8 +163,12 @@ def moving_frames(drive: Drive, rig: Rig, neighbours: int = 1) -> list[int]:
     return [i + neighbours for i in np.nonzero(span >= STATIC_SPAN)[0]]
 
 
-def check_synth_args(drives: int, frames: int, ext: str, width: int, height: int, neighbours: int) -> None:
+def check_synth_args(
+    drives: int, frames: int, ext: str, width: int, height: int, neighbours: int, profile: str = "street"
+) -> None:
     """Refuse a data set :func:`generate_synth` cannot make, before any work."""
+    if profile not in PROFILES:
+        raise PoseconsError(f"synth: unknown --profile {profile!r}; known: {', '.join(PROFILES)}")
     if drives < 2 or frames < 2 * neighbours + 1 or neighbours < 1:
         raise PoseconsError(
             f"synth needs at least 2 drives (one held out for testing) and {2 * neighbours + 1} "
@@ -183,13 +188,14 @@ def generate_synth(
     height: int = KITTI_SIZE[1],
     workers: int | None = None,
     neighbours: int = 1,
+    profile: str = "street",
 ) -> dict:
     """Write the dataset (all or nothing) and return its description (also in ``synth.json``).
 
     Training lines are the moving frames whose neighbours ±``neighbours`` exist, for training
-    with ``model.frame_ids: [0, -n, n]``.
+    with ``model.frame_ids: [0, -n, n]``. ``profile``: the scene statistics (:mod:`.profile`).
     """
-    check_synth_args(drives, frames, ext, width, height, neighbours)
+    check_synth_args(drives, frames, ext, width, height, neighbours, profile)
     workers = workers or min(2, os.cpu_count() or 1)
     rig, lidar = Rig(width, height), lidar_for_width(width)
     textures = make_textures(np.random.default_rng([seed, 1_000_003]))
@@ -205,7 +211,7 @@ def generate_synth(
         (date_dir / "calib_imu_to_velo.txt").write_text(format_calib(IMU_TO_VELO))
         (odometry / "poses").mkdir(parents=True)
         for index in range(drives):
-            drive = make_drive(seed, index, frames)
+            drive = make_drive(seed, index, frames, profile)
             folder, sequence = drive_folder(index), f"{index:02d}"
             drive_dir, seq_dir = tmp / folder, odometry / "sequences" / sequence
             for sub in ("image_02/data", "image_03/data", "velodyne_points/data", "oxts/data"):
@@ -234,6 +240,7 @@ def generate_synth(
         info = {
             "generator": "posecons synth",
             "seed": seed,
+            "profile": profile,
             "width": width,
             "height": height,
             "frames": frames,

@@ -1,5 +1,5 @@
-"""Car trajectories: varying speed (0.5–1.5 m per frame at 10 Hz), gentle turns, small pitch and
-roll, and a stop with exactly static frames."""
+"""Car trajectories: varying speed (0.5–1.5 m per frame at 10 Hz in the default profile), turns,
+small pitch and roll, and a stop with exactly static frames."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..oxts import rotation_rpy
+from .profile import PROFILES, Profile
 from .rig import IMU_HEIGHT
 
 MAX_ACCEL = 0.1  # metres per frame per frame (10 m/s² at 10 Hz)
-MAX_CURVATURE = 0.035  # 1/m: turn radius ≥ ~29 m keeps the street layout clear of the path
 
 
 @dataclass
@@ -45,16 +45,17 @@ def _follow(target: np.ndarray, start: float, max_step: float) -> np.ndarray:
     return out
 
 
-def make_trajectory(rng: np.random.Generator, frames: int) -> Trajectory:
+def make_trajectory(rng: np.random.Generator, frames: int, profile: Profile = PROFILES["street"]) -> Trajectory:
     """A drive of ``frames`` frames starting at the world origin, heading drawn at random."""
-    target_speed = _piecewise(rng, frames, lambda: rng.uniform(0.5, 1.5))
+    target_speed = _piecewise(rng, frames, lambda: rng.uniform(*profile.speed))
     speed = _follow(target_speed, target_speed[0], MAX_ACCEL)
     if frames >= 40:  # one stop: braking, 3–6 exactly static frames, pulling away
         start = int(rng.integers(5, frames - 30))
         braking = int(np.ceil(speed[start] / MAX_ACCEL))
         target_speed[start : start + braking + int(rng.integers(3, 7))] = 0.0
         speed = _follow(target_speed, target_speed[0], MAX_ACCEL)
-    curvature = _piecewise(rng, frames, lambda: rng.choice([0.0, rng.uniform(-MAX_CURVATURE, MAX_CURVATURE)]))
+    turn = profile.max_curvature
+    curvature = _piecewise(rng, frames, lambda: rng.choice([0.0, rng.uniform(-turn, turn)]))
     curvature = _follow(curvature, 0.0, 0.004)
     step = np.concatenate([[0.0], speed[:-1]])  # distance covered arriving at each frame
     yaw = rng.uniform(-np.pi, np.pi) + np.cumsum(curvature * step)

@@ -32,7 +32,8 @@ def oracle_disparities(data_path: str | Path, lines: Sequence[SplitLine], height
     drives, out = {}, []
     for line in lines:
         if line.folder not in drives:
-            drives[line.folder] = make_drive(meta["seed"], meta["drives"].index(line.folder), meta["frames"])
+            index = meta["drives"].index(line.folder)  # data from before profiles existed is "street"
+            drives[line.folder] = make_drive(meta["seed"], index, meta["frames"], meta.get("profile", "street"))
         drive, cam = drives[line.folder], _CAMERA[line.side]
         depth = camera_depth_at(drive.prims, drive.camera_pose(rig, line.frame, cam), rig.k(cam), uv)
         out.append(np.where(depth > 0, 1 / np.maximum(depth, 1e-6), 1e-3).reshape(height, width))

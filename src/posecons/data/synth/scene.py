@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .primitives import Box, Cylinder, Ground, Primitive, Sphere
+from .profile import PROFILES, Profile
 
 TEXEL = 0.03  # metres per texel at mip level 0
 TEXTURE_SIZE = 1024  # texels (a power of two); textures tile every 30.72 m
@@ -90,9 +91,11 @@ class PathFrame:
         return np.array([x - lateral * np.sin(psi), y + lateral * np.cos(psi)]), psi
 
 
-def build_scene(rng: np.random.Generator, path_xy: np.ndarray, path_heading: np.ndarray) -> list[Primitive]:
-    """Lay out a street along a path (N, 2) with headings (N,) (the car's track, extended
-    before and after so the scene covers what the sensors see). Nothing is placed within
+def build_scene(
+    rng: np.random.Generator, path_xy: np.ndarray, path_heading: np.ndarray, profile: Profile = PROFILES["street"]
+) -> list[Primitive]:
+    """Lay out a street of the ``profile`` along a path (N, 2) with headings (N,) (the car's track,
+    extended before and after so the scene covers what the sensors see). Nothing is placed within
     1.3 m of the path. Returns the primitives, ground first."""
     path = PathFrame(path_xy, path_heading)
     length = path.s[-1]
@@ -108,12 +111,12 @@ def build_scene(rng: np.random.Generator, path_xy: np.ndarray, path_heading: np.
     for s in np.arange(rng.uniform(0, 9), length, 9.0):  # dashed centre line, 1.75 m left of the car
         box(PAINT, s, 1.75, (3.0, 0.15, 0.01))
     for side in (1.0, -1.0):
-        setback = rng.uniform(7.5, 10.5)
+        setback = rng.uniform(*profile.setback)
         for s in np.arange(0.0, length, 10.0):  # sidewalk slabs between road and façades
             box(SIDEWALK, s + 5, side * (4.6 + setback) / 2, (10.05, setback - 4.6, 0.15))
         s = rng.uniform(-5, 5)
         while s < length:  # façades, with open lots holding hedges and trees
-            if rng.random() < 0.2:
+            if rng.random() < profile.open_lot:
                 lot = rng.uniform(8, 15)
                 box(FOLIAGE, s + lot / 2, side * (setback + 0.6), (lot, 1.2, rng.uniform(1.0, 2.0)))
                 _tree(prims, rng, *path.at(s + lot / 2, side * (setback + 3.0)))
@@ -125,7 +128,7 @@ def build_scene(rng: np.random.Generator, path_xy: np.ndarray, path_heading: np.
             s += length_b + rng.choice([0.0, rng.uniform(1, 4)])
         s = rng.uniform(0, 8)
         while s < length:  # parked cars: body and cabin
-            if rng.random() < 0.55:
+            if rng.random() < profile.parked_car:
                 tint = CAR_TINTS[rng.integers(len(CAR_TINTS))]
                 box(CAR, s, side * 3.4, (4.2, 1.8, 0.9), z0=0.25, tint=tint)
                 box(GLASS, s - 0.2, side * 3.4, (2.2, 1.6, 0.6), z0=1.15)
