@@ -52,6 +52,23 @@ def test_sign_flip_p_is_exact_over_all_sign_assignments():
     assert sign_flip_p([0.5]) == 1.0 and sign_flip_p([0.0, 0.0]) == 1.0 and math.isnan(sign_flip_p([]))
 
 
+def test_sign_flip_p_beyond_twenty_values_samples_assignments_in_bounded_memory():
+    """30 per-run differences (a study's EMA against raw weights): 2^30 assignments at once needed
+    8 GB and killed the process. Above 20 values the p comes from 2^20 random assignments: a mixed
+    sample's p matches the exact one of the same values computed by halves (the distribution of the
+    sum over all 2^30 sign vectors is the convolution of two 2^15 halves) to 0.002, the same call
+    gives the same p, and 30 same-sign values give scipy's two-sided floor 2 / (2^20 + 1), not 0."""
+    x = np.random.default_rng(3).normal(0.35, 1.0, 30)
+    sums = [np.array([np.dot(s, np.abs(h)) for s in itertools.product((-1, 1), repeat=15)]) for h in (x[:15], x[15:])]
+    total = np.sort(sums[1])
+    reached = sum(  # |a + b| ≥ |sum(x)| for each half-sum a, counted over the sorted b's
+        len(total) - np.searchsorted(total, abs(x.sum()) - a - 1e-9) + np.searchsorted(total, -abs(x.sum()) - a + 1e-9)
+        for a in sums[0]
+    )
+    assert sign_flip_p(x) == pytest.approx(reached / 2**30, abs=0.002) and sign_flip_p(x) == sign_flip_p(x)
+    assert sign_flip_p(np.linspace(0.1, 1.0, 30)) == pytest.approx(2 / (2**20 + 1))  # both tails
+
+
 def test_t_interval_is_mean_plus_minus_t_times_the_standard_error():
     """(1, 2, 3): mean 2, s = 1, t_{0.975, 2} = 4.302653 → 2 ± 4.302653/√3. Caught: z = 1.96, ddof = 0."""
     low, high = t_interval([1.0, 2.0, 3.0])
