@@ -77,13 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--save-disps", type=output_file, metavar="OUT.npy", help="save the model's disparities")
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
-    p.add_argument(
-        "--plots",
-        type=output_folder,
-        metavar="DIR",
-        help="write scale and error plots (PNG); with --data-path also examples.png, the best, median and "
-        "worst frame beside its ground truth",
-    )
+    p.add_argument("--plots", type=output_folder, metavar="DIR", help="plots (PNG), with --data-path also examples.png")
     p.set_defaults(func=evaluate_depth_command)
 
     p = subparsers.add_parser(
