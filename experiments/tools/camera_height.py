@@ -19,6 +19,7 @@ import numpy as np
 from posecons.data.calib import normalised_to_pixel, raw_intrinsics
 from posecons.data.gt import load_gt
 from posecons.data.splits import SIDE_TO_CAMERA
+from posecons.errors import PoseconsError
 from posecons.evaluation import evaluate
 from posecons.inference.backend import load_predictor
 from posecons.inference.scale import camera_height
@@ -51,7 +52,7 @@ def camera_height_row(spec: str, study: Path, variant: str, seed: int, frames: i
     stable, _ = evaluate.stabilised_disparities(predictor, data.train_path, data.split, disps)
 
     def scored(d: np.ndarray, scaling: str) -> dict:
-        return evaluate.evaluate_depth(d, gts, data.split, data.gt_kind, scaling=scaling)
+        return evaluate.evaluate_depth(d, gts, data.split, data.gt_kind, scaling=scaling, depth_range=data.depth_range)
 
     camera = drive_scales(disps, gts, data.split, data.train_path, frames)
     camera_stable = drive_scales(stable, gts, data.split, data.train_path, frames)
@@ -79,8 +80,13 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=10, help="frames of each drive the height is fitted on")
     args = p.parse_args()
     for run in args.runs:
-        variant, seed = run.split("/")
-        row = camera_height_row(args.spec, args.study, variant, int(seed), args.frames)
+        variant, _, seed = run.partition("/")
+        if not seed.isdigit():
+            p.exit(2, f"error: {run}: give a run as VARIANT/SEED, e.g. baseline/0\n")
+        try:
+            row = camera_height_row(args.spec, args.study, variant, int(seed), args.frames)
+        except PoseconsError as exc:  # e.g. a run whose checkpoint is not on this machine
+            p.exit(2, f"error: {exc}\n")
         print(f"{run}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
 
 
