@@ -2,6 +2,7 @@ import math
 
 import pytest
 import torch
+import torch.nn.functional as F
 
 from posecons.geometry import invert_pose, make_pose, pose_vec_to_mat
 from posecons.losses import (
@@ -130,6 +131,34 @@ def test_ssim_matches_window_by_window_formula():
         expected[c, i, j] = np.clip((1 - ssim) / 2, 0, 1)
     out = ssim_dissimilarity(torch.from_numpy(x)[None], torch.from_numpy(y)[None])[0].numpy()
     assert np.allclose(out, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("dtype, atol", [(torch.float32, 1e-4), (torch.float64, 1e-12)])
+def test_photometric_error_with_separable_box_filter_equals_the_pooled_form(dtype, atol):
+    # The 3×3 means are two separable sums of shifted views for speed; the reference below is the
+    # pooling form (Monodepth2's). The loss value equals it to 1e-6 in float32, its gradient to float rounding.
+    def pooled_ssim(x, y):
+        c1, c2 = 0.01**2, 0.03**2
+        x, y = F.pad(x, (1, 1, 1, 1), mode="reflect"), F.pad(y, (1, 1, 1, 1), mode="reflect")
+        mu_x, mu_y = F.avg_pool2d(x, 3, 1), F.avg_pool2d(y, 3, 1)
+        var_x, var_y = F.avg_pool2d(x * x, 3, 1) - mu_x**2, F.avg_pool2d(y * y, 3, 1) - mu_y**2
+        cov = F.avg_pool2d(x * y, 3, 1) - mu_x * mu_y
+        ssim = ((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x**2 + mu_y**2 + c1) * (var_x + var_y + c2))
+        return ((1 - ssim) / 2).clamp(0, 1)
+
+    g = torch.Generator().manual_seed(0)
+    target = F.avg_pool2d(torch.rand(2, 3, 34, 50, generator=g, dtype=dtype), 3, 1)  # smooth, image-like
+    pred = (target + 0.05 * torch.randn(target.shape, generator=g, dtype=dtype)).clamp(0, 1).requires_grad_()
+    expected = 0.85 * pooled_ssim(pred, target).mean(1, keepdim=True) + 0.15 * (pred - target).abs().mean(
+        1, keepdim=True
+    )
+    (grad_expected,) = torch.autograd.grad(expected.mean(), pred)
+    out = photometric_error(pred, target)
+    (grad,) = torch.autograd.grad(out.mean(), pred)
+    assert torch.allclose(out, expected, rtol=0, atol=atol)
+    assert abs(out.mean().item() - expected.mean().item()) <= (1e-6 if dtype == torch.float32 else 1e-14)
+    relative = (grad - grad_expected).norm() / grad_expected.norm()
+    assert relative <= (1e-4 if dtype == torch.float32 else 1e-12), relative
 
 
 def plane_seen_after(t, dtype=torch.float64, b=2, h=16, w=24, z=10.0, f=20.0):
