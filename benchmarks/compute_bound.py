@@ -16,7 +16,7 @@ from functools import partial
 
 import torch
 from torch.utils.flop_counter import FlopCounterMode
-from train_step import make_batch, make_model, setting_arguments
+from train_step import make_batch, make_model, setting, setting_arguments
 
 from posecons.data.augment import jitter_batch
 from posecons.networks import ResnetEncoder
@@ -64,20 +64,22 @@ def main() -> None:
     device = torch.device(args.device)
     print(f"{args.device}, {torch.get_num_threads()} threads, torch {torch.__version__}")
     for constraints in ([], ["fb", "id", "cyc"]):
-        step = partial(model_step, make_model(constraints, args, device), make_batch(args, device))
+        cfg = setting(constraints, args)
+        step = partial(model_step, make_model(cfg, device), make_batch(cfg, device))
         print(f"step FLOPs, constraints {constraints or 'none'}: {flops(step) / 1e12:.3f} TFLOP")
     for dtype in (torch.float32, torch.bfloat16):
         a, b = (torch.randn(2048, 2048, dtype=dtype, device=device) for _ in range(2))
         print(
             f"matrix product 2048³, {dtype}: {2 * 2048**3 / seconds(partial(product, a, b), args.repeats) / 1e9:.0f} GFLOP/s"
         )
-    encoder = ResnetEncoder(args.layers).to(device).train()
-    x = torch.randn(args.batch, 3, args.height, args.width, device=device)
+    m = cfg.model
+    encoder = ResnetEncoder(m.num_layers).to(device).train()
+    x = torch.randn(cfg.train.batch_size, 3, m.height, m.width, device=device)
     for bf16 in (False, True):
         run = partial(encoder_step, encoder, x, bf16)
         n, s = flops(run), seconds(run, args.repeats)
         print(
-            f"ResNet-{args.layers} encoder forward+backward, bf16 {bf16}: "
+            f"ResNet-{m.num_layers} encoder forward+backward, bf16 {bf16}: "
             f"{n / 1e9:.0f} GFLOP in {s:.2f} s = {n / s / 1e9:.0f} GFLOP/s"
         )
 

@@ -1,0 +1,117 @@
+"""Where a training step's time goes: torch.profiler over whole steps (forward, losses, backward,
+Adam), each operator's own time summed into the parts of the method, every part of at least 3 % named.
+The last line is the step's time over its convolutions' time (forward and backward), the ratio the
+throughput issue asks to bring to 1.3×.
+
+    python benchmarks/profile_step.py --bf16                        # the paper's 640×192, batch 12
+    python benchmarks/profile_step.py --bf16 --preset synth/study   # the study setting (192×64, batch 8)
+
+Random frames (train_step.py's batch); run it on an otherwise idle machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from collections import defaultdict
+
+import torch
+from torch.profiler import ProfilerActivity, profile, record_function
+from train_step import VARIANTS, make_batch, make_model, setting, setting_arguments
+
+from posecons.data.augment import jitter_batch
+from posecons.training.precision import adam
+
+# Operator name → part of the method; the first pattern that matches wins. Everything else the
+# forward pass and the losses run is element-wise arithmetic, reductions and copies.
+PARTS = [
+    ("convolutions", r"conv"),
+    ("SSIM box filters (avg_pool2d)", r"avg_pool"),
+    ("reflection padding (SSIM, decoder)", r"reflection_pad"),
+    ("warps (grid_sample)", r"grid_sampler"),
+    ("resizing (interpolate)", r"upsample|interpolate"),
+    ("BatchNorm", r"batch_norm"),
+    ("ReLU / ELU / sigmoid", r"relu|elu|sigmoid|threshold"),
+    ("max pooling", r"max_pool"),
+]
+
+
+def part_of(name: str, phase: str) -> str:
+    if phase == "optimizer":
+        return "Adam"
+    for part, pattern in PARTS:
+        if re.search(pattern, name):
+            return part
+    return f"other element-wise, reductions, copies ({phase})"
+
+
+def phase_of(event) -> str:
+    """The step phase (forward / backward / optimizer) an operator ran under."""
+    while event is not None:
+        if event.name in ("forward", "backward", "optimizer"):
+            return event.name
+        event = event.cpu_parent
+    return "forward"
+
+
+def profile_steps(constraints: list[str], args: argparse.Namespace) -> tuple[dict[str, float], float]:
+    """Milliseconds per step of each part, and the step's wall time in ms (profiled)."""
+    device, cfg = torch.device(args.device), setting(constraints, args)
+    model, batch = make_model(cfg, device), make_batch(cfg, device)
+    optim = adam(model.parameters(), 1e-4, device)  # the trainer's optimiser
+
+    def step(i: int) -> None:
+        optim.zero_grad(set_to_none=True)
+        with record_function("forward"), torch.autocast(device.type, dtype=torch.bfloat16, enabled=args.bf16):
+            _, losses = model(jitter_batch(batch), step=i)
+        with record_function("backward"):
+            losses["total"].backward()
+        with record_function("optimizer"):
+            optim.step()
+
+    for i in range(args.warmup):
+        step(i)
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        with record_function("steps"):
+            for i in range(args.steps):
+                step(i)
+    parts: dict[str, float] = defaultdict(float)
+    total = 0.0
+    for event in prof.events():
+        if event.name == "steps":
+            total = event.cpu_time_total / 1e3 / args.steps
+        elif event.name not in ("forward", "backward", "optimizer"):
+            parts[part_of(event.name, phase_of(event))] += event.self_cpu_time_total / 1e3 / args.steps
+    return parts, total
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    setting_arguments(p)
+    p.add_argument("--steps", type=int, default=3)
+    p.add_argument("--warmup", type=int, default=1)
+    p.add_argument("--bf16", action="store_true", help="autocast the networks to bfloat16 (losses stay fp32)")
+    p.add_argument("--variants", nargs="+", default=["baseline"], choices=list(VARIANTS))
+    args = p.parse_args()
+    m, batch = (cfg := setting([], args)).model, cfg.train.batch_size
+    precision = "bf16 autocast" if args.bf16 else "fp32"
+    print(
+        f"{args.preset or 'paper setting'}: ResNet-{m.num_layers}, {m.height}×{m.width}, batch {batch}, "
+        f"{precision}, {args.device}, torch {torch.__version__}, {torch.get_num_threads()} threads, "
+        f"{args.steps} profiled steps after {args.warmup}"
+    )
+    for name in args.variants:
+        parts, total = profile_steps(VARIANTS[name], args)
+        print(f"\n{name}: {total:.0f} ms a step\n\n| part | ms a step | share |\n|---|---|---|")
+        small = 0.0
+        for part, ms in sorted(parts.items(), key=lambda kv: -kv[1]):
+            if ms >= 0.03 * total:
+                print(f"| {part} | {ms:.0f} | {100 * ms / total:.1f} % |")
+            else:
+                small += ms
+        print(f"| each other part (< 3 % each), together | {small:.0f} | {100 * small / total:.1f} % |")
+        print(f"\nstep ÷ convolutions: {total / parts['convolutions']:.2f}×")
+
+
+if __name__ == "__main__":
+    main()
