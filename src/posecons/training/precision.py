@@ -56,6 +56,13 @@ def autocast(precision: str, device: torch.device) -> torch.autocast:
     return torch.autocast(device.type, dtype=dtype, enabled=dtype is not None)
 
 
+def adam(params, lr: float, device: torch.device) -> torch.optim.Adam:
+    """Adam with the fused kernel where the build has it for ``device`` (CPU and CUDA): one pass over all
+    parameters instead of a loop of small ones, 4–6× faster on the development CPU (docs/performance.md),
+    the same update up to float rounding."""
+    return torch.optim.Adam(params, lr=lr, fused=device.type in ("cpu", "cuda"))
+
+
 def use_deterministic_algorithms(device: torch.device) -> None:
     """Deterministic kernels for exact resume. On CUDA, cuBLAS needs a fixed workspace and some
     backward kernels (grid_sample, reflection padding, bilinear interpolation) have no

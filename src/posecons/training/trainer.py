@@ -48,7 +48,7 @@ from ..fileio import keep_copy, write_json, write_text
 from ..model import PoseConsModel
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .initial_weights import initial_model, without_imagenet
-from .precision import autocast, resolve_precision, use_deterministic_algorithms
+from .precision import adam, autocast, resolve_precision, use_deterministic_algorithms
 from .resume import PREVIOUS, restore_training_state, state_to_resume, training_state
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
@@ -123,7 +123,7 @@ class Trainer:
             if self.env.world > 1
             else model
         )
-        self.optimizer = torch.optim.Adam(model.parameters(), lr=t.lr)
+        self.optimizer = adam(model.parameters(), t.lr, self.device)
         self.scheduler = torch.optim.lr_scheduler.MultiStepLR(self.optimizer, t.lr_decay_epochs, t.lr_decay)
         self.scaler = torch.amp.GradScaler(self.device.type, enabled=self.precision == "16")
         self.steps_per_epoch = len(self.train_set) // (t.batch_size * self.env.world * t.grad_accum)
