@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -128,13 +129,21 @@ def calibrate(
     return scaling.combine("camera_height", names, scales, "no ground plane found")
 
 
-def _write_depth(out: Path, frame: Frame, depth: np.ndarray, limits: tuple[float, float]) -> np.ndarray:
+def _write_frame(out: Path, frame: Frame, depth: np.ndarray, limits, writer, options: PredictOptions, K_norm) -> None:
+    """Every output of one frame: depth .npy and PNGs, its side-by-side video frame, its point cloud."""
+    # zlib level 1 instead of Pillow's 6: on real 960×540 depth 3.3× less time for the two PNGs (94
+    # against 312 ms a frame, a third of predict's time) for 12 % (16-bit) and 50 % (colour) more bytes.
     np.save(out / "depth" / f"{frame.name}.npy", depth.astype(np.float32))
     png = np.clip(np.round(depth * 256), 0, 65535).astype(np.uint16)
-    Image.fromarray(png).save(out / "depth_png" / f"{frame.name}.png")
+    Image.fromarray(png).save(out / "depth_png" / f"{frame.name}.png", compress_level=1)
     color = colorize(1.0 / depth, limits=limits)
-    Image.fromarray(color).save(out / "depth_color" / f"{frame.name}.png")
-    return color
+    Image.fromarray(color).save(out / "depth_color" / f"{frame.name}.png", compress_level=1)
+    if writer is not None:
+        writer.write(frame.image, color)
+    if options.pointcloud and frame.index % options.every == 0:
+        K = normalised_to_pixel(K_norm, *frame.size)
+        points = depth_to_points(depth, frame.image, K)
+        write_ply(out / "pointcloud" / f"{frame.name}.ply", *points, binary=not options.ascii_ply)
 
 
 def predict(predictor: Predictor, input: str | Path, out: str | Path, options: PredictOptions | None = None) -> dict:
@@ -165,35 +174,38 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
         stabiliser = StreamStabiliser(K_net, options.time_constant) if options.stabilise else None
         factors: list[float] = []
         bar = tqdm(total=len(source) or None, unit="frame", disable=not options.progress)
-        for frames, images, disps in predict_batches(predictor, source, options.batch_size):
-            steps = chain.add(images) if do_pose else None
-            batch_factors = [1.0] * len(frames)
-            if stabiliser is not None:  # depth and steps in the network's own units: s cancels in the ratios
-                batch_factors = stabiliser.add(1.0 / disps[:, 0].double().cpu(), torch.from_numpy(steps))
-                factors += batch_factors
-            depths = [
-                full_size_depth(disp, *frame.size) * np.float32(s * f)
-                for frame, disp, f in zip(frames, disps, batch_factors)
-            ]
-            if limits is None:  # one colour range for the sequence, from its first batch: no flicker
-                limits = colour_range(np.concatenate([1.0 / d.ravel() for d in depths]))
-            for frame, disp, depth, f in zip(frames, disps, depths, batch_factors):
-                color = _write_depth(tmp, frame, depth, limits)
-                if writer is not None:
-                    writer.write(frame.image, color)
-                if options.pointcloud and frame.index % options.every == 0:
-                    K = normalised_to_pixel(K_norm, *frame.size)
-                    write_ply(
-                        tmp / "pointcloud" / f"{frame.name}.ply",
-                        *depth_to_points(depth, frame.image, K),
-                        binary=not options.ascii_ply,
-                    )
-                target = gt.get(frame.name, frame.index) if gt is not None else None
-                if target is not None:
-                    drift.append((frame.index, frame.name, gt_scale(target, disp / f)))
-                times.append(frame.time)
-                count += 1
-            bar.update(len(frames))
+        # One thread writes a batch's outputs while the next batch is decoded and run through the
+        # networks (which release the GIL); waiting for it before handing it the next batch keeps
+        # at most one batch in memory and the video's frames in order.
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            written: list[Future] = []
+            for frames, images, disps in predict_batches(predictor, source, options.batch_size):
+                steps = chain.add(images) if do_pose else None
+                batch_factors = [1.0] * len(frames)
+                if stabiliser is not None:  # depth and steps in the network's own units: s cancels in the ratios
+                    batch_factors = stabiliser.add(1.0 / disps[:, 0].double().cpu(), torch.from_numpy(steps))
+                    factors += batch_factors
+                depths = [
+                    full_size_depth(disp, *frame.size) * np.float32(s * f)
+                    for frame, disp, f in zip(frames, disps, batch_factors)
+                ]
+                if limits is None:  # one colour range for the sequence, from its first batch: no flicker
+                    limits = colour_range(np.concatenate([1.0 / d.ravel() for d in depths]))
+                for frame, disp, f in zip(frames, disps, batch_factors):
+                    target = gt.get(frame.name, frame.index) if gt is not None else None
+                    if target is not None:
+                        drift.append((frame.index, frame.name, gt_scale(target, disp / f)))
+                    times.append(frame.time)
+                for job in written:
+                    job.result()
+                written = [
+                    pool.submit(_write_frame, tmp, frame, depth, limits, writer, options, K_norm)
+                    for frame, depth in zip(frames, depths)
+                ]
+                count += len(frames)
+                bar.update(len(frames))
+            for job in written:
+                job.result()
         bar.close()
         if writer is not None:
             writer.close()
