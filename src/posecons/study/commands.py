@@ -22,8 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--report",
         type=output_file,
         metavar="PATH",
-        help="write the report here instead of OUT/results.md, its figures in PATH without its suffix "
-        "(docs/results.md → docs/results/) and copies of the result JSONs in that folder's json/",
+        help="the report (default OUT/results.md); its figures and JSON copies go beside it (docs/study.md)",
     )
     p.add_argument("--report-only", action="store_true", help="train nothing: rebuild the report from the JSONs")
     p.add_argument(
