@@ -18,7 +18,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "train",
         help="train depth and pose networks from a preset",
         description="Train a run. Multi-GPU on one node: --devices N (torchrun is started "
-        "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node.",
+        "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node. Ctrl-C (or SIGTERM) "
+        "saves the run's state at the end of the step; the same command with --resume continues it.",
     )
     p.add_argument("--config", help="preset file or bundled name (e.g. kitti/cycle); default on --resume: the run's")
     p.add_argument("--data-path", required=True, help="dataset root (KITTI raw layout, or odometry root)")
