@@ -165,3 +165,29 @@ def test_groups_of_different_sizes_equal_separate_calls():
         assert torch.allclose(buf.float(), other.float(), atol=1e-6), name
     with pytest.raises(ValueError, match="8 pairs does not split into groups of sizes \\[3, 3, 1\\]"):
         batched(a, b, groups=[3, 3, 1])
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+def test_resnet_max_pool_equals_the_standard_operator_bit_for_bit(dtype):
+    # Values rounded to a coarse grid after a ReLU: many ties, where the first maximum must win as in
+    # F.max_pool2d; the gradient then flows to the same inputs.
+    from posecons.networks import resnet_max_pool
+
+    g = torch.Generator().manual_seed(0)
+    x = (torch.relu(torch.randn(3, 5, 14, 22, generator=g)) * 4).round().div(4).to(dtype)
+    grad = torch.randn(3, 5, 7, 11, generator=g).to(dtype)
+    a, b = x.clone().requires_grad_(), x.clone().requires_grad_()
+    out, expected = resnet_max_pool(a), torch.nn.functional.max_pool2d(b, 3, 2, 1)
+    out.backward(grad)
+    expected.backward(grad)
+    assert out.is_contiguous() and torch.equal(out, expected)
+    assert torch.equal(a.grad, b.grad)
+
+
+def test_encoder_pools_as_its_resnet_declares():
+    # The encoder's own pooling must be the torchvision ResNet's maxpool module, whatever route it takes.
+    enc = ResnetEncoder(10).eval()
+    x = torch.rand(2, 3, 64, 96)
+    stem = enc.net.relu(enc.net.bn1(enc.net.conv1((x - 0.45) / 0.225)))
+    with torch.no_grad():
+        assert torch.equal(enc(x)[1], enc.net.layer1(enc.net.maxpool(stem)))
