@@ -191,3 +191,22 @@ def test_encoder_pools_as_its_resnet_declares():
     stem = enc.net.relu(enc.net.bn1(enc.net.conv1((x - 0.45) / 0.225)))
     with torch.no_grad():
         assert torch.equal(enc(x)[1], enc.net.layer1(enc.net.maxpool(stem)))
+
+
+@pytest.mark.parametrize("dtype, atol", [(torch.float32, 1e-7), (torch.bfloat16, 8e-3)])
+def test_elu_equals_torch_elu(dtype, atol):
+    # e^x − 1 from exp in float32 instead of expm1: equal to float32 rounding near zero (bf16: one of
+    # its steps at most), exact for x > 0; the gradient is nn.ELU's kernel on the same result.
+    from posecons.networks import ELU
+
+    g = torch.Generator().manual_seed(0)
+    x = (torch.randn(2, 4, 9, 13, generator=g) * 3).to(dtype)
+    grad = torch.randn(2, 4, 9, 13, generator=g).to(dtype)
+    a, b = x.clone().requires_grad_(), x.clone().requires_grad_()
+    out, expected = ELU()(a), torch.nn.functional.elu(b)
+    out.backward(grad)
+    expected.backward(grad)
+    assert torch.equal(out[x > 0], x[x > 0]) and out.dtype == dtype
+    assert torch.allclose(out.float(), expected.float(), rtol=0, atol=atol)
+    assert torch.allclose(a.grad.float(), b.grad.float(), rtol=0, atol=2 * atol)
+    assert (out[x < -1] < -0.6).all()  # the negative branch is e^x − 1, not e^x or x
