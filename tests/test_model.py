@@ -438,3 +438,42 @@ def test_sc_depth_form_adds_the_reverse_direction_and_weights_the_photometric_er
     assert losses["sc_depth"]["dc"].item() == pytest.approx((1 / 23 + 1 / 21) / 2, rel=1e-4)
     one_way, masked = losses["one_way"]["photometric"].item(), losses["sc_depth"]["photometric"].item()
     assert one_way > 1e-3 and masked == pytest.approx(one_way * (1 - 1 / 23), rel=1e-4)
+
+
+def losses_and_grads(model: PoseConsModel, batch: dict) -> tuple[dict, list[torch.Tensor]]:
+    torch.manual_seed(1)  # the auto-mask's tie-breaking noise
+    _, losses = model(batch)
+    losses["total"].backward()
+    return {k: v.detach() for k, v in losses.items()}, [p.grad for p in model.parameters()]
+
+
+def test_compiled_photometric_error_gives_the_eager_losses_and_gradients():
+    batch = random_batch()
+    torch.manual_seed(0)
+    eager = PoseConsModel(make_config(["cyc"]))
+    torch.manual_seed(0)
+    compiled = PoseConsModel(make_config(["cyc"], **{"train.compile_losses": "true"}))
+    want, want_grads = losses_and_grads(eager, batch)
+    got, got_grads = losses_and_grads(compiled, batch)
+    if compiled.photometric_error.fn is compiled.photometric_error.eager:
+        pytest.skip("torch.compile cannot compile here (its warning names why)")
+    assert want.keys() == got.keys()
+    for k in want:
+        torch.testing.assert_close(got[k], want[k], rtol=1e-6, atol=1e-6)
+    for g, w in zip(got_grads, want_grads):
+        torch.testing.assert_close(g, w, rtol=1e-4, atol=1e-6)
+
+
+def test_photometric_error_runs_eagerly_where_torch_compile_cannot_compile(monkeypatch, caplog):
+    monkeypatch.setattr(torch._inductor.config.cpp, "cxx", ("no-such-compiler",))
+    torch._dynamo.reset()  # no graph compiled by another test may be reused
+    batch = random_batch()
+    torch.manual_seed(0)
+    eager = PoseConsModel(make_config())
+    torch.manual_seed(0)
+    compiled = PoseConsModel(make_config(**{"train.compile_losses": "true"}))
+    want, _ = losses_and_grads(eager, batch)
+    got, _ = losses_and_grads(compiled, batch)
+    assert compiled.photometric_error.fn is compiled.photometric_error.eager
+    assert "torch.compile failed" in caplog.text and "no-such-compiler" in caplog.text
+    assert all(torch.equal(got[k], want[k]) for k in want)

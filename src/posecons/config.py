@@ -195,6 +195,10 @@ class TrainConfig:
     # "32", "bf16" (GPU or CPU), "16" (GPU) or "auto" (bf16 where the device computes it natively, else 32):
     # the networks under autocast, their outputs fp32.
     precision: str = "32"
+    # torch.compile the photometric error (SSIM + L1, the largest element-wise part of a step at the
+    # paper's resolution): the first steps take longer while it compiles; where it cannot compile (no
+    # C++ compiler, an unsupported build) the losses run eagerly, with one warning (docs/performance.md)
+    compile_losses: bool = False
     sync_bn: bool = False  # SyncBatchNorm in the depth net across processes (the pose net's stays per group)
     max_steps: int = 0  # 0: run all epochs
     log_every: int = 50

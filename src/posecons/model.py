@@ -12,6 +12,9 @@ Batch keys (see ``posecons.data``):
 
 from __future__ import annotations
 
+import logging
+from typing import Callable
+
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
@@ -60,6 +63,23 @@ def temporal(f: int) -> tuple[int, int]:
     return (min(f, 0), max(f, 0))
 
 
+class _CompiledOrEager:
+    """``torch.compile(fn)``, and ``fn`` itself from the first call on that fails to compile."""
+
+    def __init__(self, fn: Callable):
+        self.eager, self.fn = fn, torch.compile(fn, dynamic=False)
+
+    def __call__(self, *args):
+        try:
+            return self.fn(*args)
+        except torch._dynamo.exc.BackendCompilerFailed as exc:  # e.g. no C++ compiler
+            logging.getLogger(__name__).warning(
+                "train.compile_losses: torch.compile failed (%s); the losses run eagerly", str(exc).splitlines()[0]
+            )
+            self.fn = self.eager
+            return self.fn(*args)
+
+
 class PoseConsModel(nn.Module):
     def __init__(self, config: Config):
         super().__init__()
@@ -68,6 +88,9 @@ class PoseConsModel(nn.Module):
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
         self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
         self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror)
+        self.photometric_error = (
+            _CompiledOrEager(photometric_error) if config.train.compile_losses else photometric_error
+        )
         # How the encoders were initialised, for the run's config, checkpoints and reports.
         self.initialisation = (
             f"ImageNet ({imagenet_weights_name(m.num_layers)})"
@@ -224,8 +247,8 @@ class PoseConsModel(nn.Module):
         depth = disp_to_depth(source_disp[index * b : (index + 1) * b].float(), m.min_depth, m.max_depth)[1]
         target, source = frames[:, m.frame_ids.index(prev)], frames[:, m.frame_ids.index(nxt)]
         K = scale_intrinsics(K_norm, m.height, m.width)
-        reprojection = photometric_error(warp(source, depth, T_skip, K), target, lo.ssim_weight)
-        identity = photometric_error(source, target, lo.ssim_weight) if lo.automask else None
+        reprojection = self.photometric_error(warp(source, depth, T_skip, K), target, lo.ssim_weight)
+        identity = self.photometric_error(source, target, lo.ssim_weight) if lo.automask else None
         return min_reprojection(reprojection, identity)[0].mean()
 
     def _view_synthesis_losses(
@@ -257,7 +280,7 @@ class PoseConsModel(nn.Module):
             K = scale_intrinsics(K_norm, *size)
             reproj = torch.cat(
                 [
-                    photometric_error(warp(src, depth, poses[f], K), tgt, lo.ssim_weight)
+                    self.photometric_error(warp(src, depth, poses[f], K), tgt, lo.ssim_weight)
                     for f, src in zip(m.frame_ids[1:], srcs)
                 ],
                 1,
@@ -265,7 +288,7 @@ class PoseConsModel(nn.Module):
             if masks is not None:
                 reproj = reproj * (masks if masks.shape[-2:] == size else F.interpolate(masks, size=size, mode="area"))
             if lo.automask and (identity is None or lo.v1_multiscale):
-                identity = torch.cat([photometric_error(src, tgt, lo.ssim_weight) for src in srcs], 1)
+                identity = torch.cat([self.photometric_error(src, tgt, lo.ssim_weight) for src in srcs], 1)
             per_pixel, keep = min_reprojection(reproj, identity if lo.automask else None)
             automask = keep if automask is None else automask
             photo.append(per_pixel.mean())
