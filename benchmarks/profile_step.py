@@ -1,10 +1,12 @@
 """Where a training step's time goes: torch.profiler over whole steps (forward, losses, backward,
-Adam), each operator's own time summed into the parts of the method, every part of at least 3 % named.
+Adam), each operator's own time summed into the parts of the method — the forward pass of each loss
+function, convolutions, Adam, kinds of operator, then single operators — every part of at least 3 % named.
 The last line is the step's time over its convolutions' time (forward and backward), the ratio the
 throughput issue asks to bring to 1.3×.
 
     python benchmarks/profile_step.py --bf16                        # the paper's 640×192, batch 12
     python benchmarks/profile_step.py --bf16 --preset synth/study   # the study setting (192×64, batch 8)
+    python benchmarks/profile_step.py --bf16 --compile-losses       # with train.compile_losses
 
 Random frames (train_step.py's batch); run it on an otherwise idle machine.
 """
@@ -19,6 +21,7 @@ import torch
 from torch.profiler import ProfilerActivity, profile, record_function
 from train_step import VARIANTS, make_batch, make_model, setting, setting_arguments
 
+import posecons.model
 from posecons.data.augment import jitter_batch
 from posecons.training.precision import adam
 
@@ -36,28 +39,63 @@ PARTS = [
 ]
 
 
-def part_of(name: str, phase: str) -> str:
+# The model's loss functions, each run under a profiler label: their forward operators, whatever they
+# are, count as that part (their backward operators cannot be told apart from the networks').
+LOSSES = {
+    "photometric_error": "photometric error, forward (SSIM + L1)",
+    "warp": "warps, forward (back-projection, grid_sample)",
+    "smoothness_loss": "smoothness, forward",
+    "min_reprojection": "minimum reprojection and auto-mask, forward",
+}
+PHASES = ("forward", "backward", "optimizer")
+
+
+def labelled(fn, label: str):
+    def run(*args, **kwargs):
+        with record_function(label):
+            return fn(*args, **kwargs)
+
+    return run
+
+
+def label_losses(model: posecons.model.PoseConsModel) -> None:
+    """Label the loss functions the model calls (its compiled photometric error from outside)."""
+    for name, label in LOSSES.items():
+        if name == "photometric_error":
+            model.photometric_error = labelled(model.photometric_error, label)
+        else:
+            setattr(posecons.model, name, labelled(getattr(posecons.model, name), label))
+
+
+def part_of(event) -> str:
+    """The part an operator belongs to: the loss it ran in, Adam, a named kind of operator, or the
+    operator itself with its phase (forward / backward)."""
+    labels, phase = set(LOSSES.values()), "forward"
+    parent, loss = event.cpu_parent, None
+    while parent is not None:
+        if parent.name in labels and loss is None:
+            loss = parent.name
+        if parent.name in PHASES:
+            phase = parent.name
+            break
+        parent = parent.cpu_parent
     if phase == "optimizer":
         return "Adam"
+    if re.search(PARTS[0][1], event.name):
+        return PARTS[0][0]  # convolutions, wherever they run
+    if loss is not None:
+        return loss
     for part, pattern in PARTS:
-        if re.search(pattern, name):
+        if re.search(pattern, event.name):
             return part
-    return f"other element-wise, reductions, copies ({phase})"
-
-
-def phase_of(event) -> str:
-    """The step phase (forward / backward / optimizer) an operator ran under."""
-    while event is not None:
-        if event.name in ("forward", "backward", "optimizer"):
-            return event.name
-        event = event.cpu_parent
-    return "forward"
+    return f"{event.name} ({phase})"
 
 
 def profile_steps(constraints: list[str], args: argparse.Namespace) -> tuple[dict[str, float], float]:
     """Milliseconds per step of each part, and the step's wall time in ms (profiled)."""
     device, cfg = torch.device(args.device), setting(constraints, args)
     model, batch = make_model(cfg, device), make_batch(cfg, device)
+    label_losses(model)
     optim = adam(model.parameters(), 1e-4, device)  # the trainer's optimiser
 
     def step(i: int) -> None:
@@ -80,8 +118,8 @@ def profile_steps(constraints: list[str], args: argparse.Namespace) -> tuple[dic
     for event in prof.events():
         if event.name == "steps":
             total = event.cpu_time_total / 1e3 / args.steps
-        elif event.name not in ("forward", "backward", "optimizer"):
-            parts[part_of(event.name, phase_of(event))] += event.self_cpu_time_total / 1e3 / args.steps
+        elif event.name not in PHASES and event.name not in LOSSES.values():
+            parts[part_of(event)] += event.self_cpu_time_total / 1e3 / args.steps
     return parts, total
 
 

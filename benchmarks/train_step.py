@@ -28,6 +28,7 @@ def setting(constraints: list[str], args: argparse.Namespace) -> Config:
     and encoder depth given on the command line, random initial weights and these constraints."""
     given = {"model.height": args.height, "model.width": args.width, "model.num_layers": args.layers}
     given["train.batch_size"] = args.batch
+    given["train.compile_losses"] = "true" if args.compile_losses else None
     overrides = [f"{key}={value}" for key, value in given.items() if value is not None]
     overrides += ["model.pretrained=false", f"loss.constraints=[{','.join(constraints)}]"]
     return load_config(resolve_preset(args.preset) if args.preset else None, overrides)
@@ -80,6 +81,7 @@ def setting_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, help="default: the preset's (paper: 12)")
     p.add_argument("--layers", type=int, help="ResNet depth; default: the preset's (paper: 18)")
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    p.add_argument("--compile-losses", action="store_true", help="train.compile_losses=true (torch.compile)")
 
 
 def main() -> None:
