@@ -2,6 +2,7 @@
 option's help shows its default."""
 
 import argparse
+import inspect
 import subprocess
 import sys
 
@@ -60,3 +61,16 @@ def test_train_on_several_devices_relaunches_the_argv_given_to_main(monkeypatch,
     assert main(argv) == 0
     [cmd] = launched
     assert cmd[cmd.index("posecons.cli") + 1 :] == argv and "--nproc-per-node=2" in cmd
+
+
+def test_each_command_is_described_by_its_function_docstring():
+    """`posecons --help` lists each command with the first line of its function's docstring, and the
+    command's own --help starts with the rest."""
+    parser = build_parser()
+    sub = parser._subparsers._group_actions[0]
+    summaries = {a.dest: a.help for a in sub._choices_actions}
+    for name, command in sub.choices.items():
+        func = command.get_default("func")
+        summary, _, description = func.__doc__.partition("\n\n")
+        assert summaries[name] == summary and "\n" not in summary, name
+        assert command.description == (inspect.cleandoc(description) or None), name

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import math
 import re
 import signal
@@ -77,6 +78,18 @@ def _writable(folder: bool) -> Callable[[str], Path]:
 # Output paths are checked when parsed, so an impossible one fails before any work is done.
 output_file = _writable(folder=False)
 output_folder = _writable(folder=True)
+
+
+def add_command(
+    subparsers: argparse._SubParsersAction, name: str, func: Callable[[argparse.Namespace], int]
+) -> argparse.ArgumentParser:
+    """The sub-command ``name`` that runs ``func``, described by ``func``'s docstring (written for users):
+    its first line is the command's line in ``posecons --help``, the rest the description of its own
+    ``--help``."""
+    summary, _, description = inspect.getdoc(func).partition("\n\n")
+    parser = subparsers.add_parser(name, help=summary, description=description or None)
+    parser.set_defaults(func=func)
+    return parser
 
 
 def add_overrides(parser: argparse.ArgumentParser, example: str) -> None:

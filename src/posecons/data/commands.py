@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..cli import (
+    add_command,
     add_overrides,
     field_of_view,
     finite_float,
@@ -28,7 +29,7 @@ PIXEL_INTRINSICS = ("fx", "fy", "cx", "cy")
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data commands to the CLI's sub-command parser."""
-    p = subparsers.add_parser("synth", help="write a synthetic KITTI-like dataset (raw + odometry + splits)")
+    p = add_command(subparsers, "synth", _synth)
     p.add_argument(
         "--out", type=output_folder, required=True, help="output folder: new, empty, or an earlier synth output"
     )
@@ -56,9 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="scene statistics: street (the studies' benchmark) or open (a second benchmark: speed "
         "0.3–2 m a frame, sharper turns, façades 6–30 m away, more open lots)",
     )
-    p.set_defaults(func=_synth)
 
-    p = subparsers.add_parser("export-gt", help="export the ground-truth depth of a split to .npz")
+    p = add_command(subparsers, "export-gt", _export_gt)
     p.add_argument("--data-path", type=Path, required=True, help="KITTI raw root")
     p.add_argument("--split-file", type=Path, required=True, help="split file: <folder> <frame> <l|r> lines")
     p.add_argument("--out", type=output_file, required=True, help="output .npz")
@@ -75,9 +75,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="velo_x",
         help="LiDAR depth value: forward x (Eigen protocol) or camera z",
     )
-    p.set_defaults(func=_export_gt)
 
-    p = subparsers.add_parser("prepare", help="turn videos or frame folders into a KITTI-raw-layout dataset")
+    p = add_command(subparsers, "prepare", _prepare)
     p.add_argument("--input", type=Path, nargs="+", required=True, help="video files and/or folders of frames")
     p.add_argument("--out", type=output_folder, required=True, help="output dataset folder (new or empty)")
     _add_pixel_intrinsics(p)
@@ -103,15 +102,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="drop frames whose mean grey difference (0–1 scale) to the last kept one is below this "
         "(default 0.004: a standing camera; highway video at 12.5 fps differs by 0.006–0.017)",
     )
-    p.set_defaults(func=_prepare)
 
-    p = subparsers.add_parser(
-        "prepare-rgbd",
-        help="turn an RGB-D sequence (colour, depth, poses) into a dataset with depth and pose ground truth",
-        description="The prepare layout of the colour frames, plus OUT/gt_depths.npz (their depth in metres, "
-        "for evaluate-depth --gt-kind dense) and, with poses, OUT/odometry (for evaluate-pose). Patterns are "
-        "relative to --input; their one * is the frame's name, which pairs a colour frame with its files.",
-    )
+    p = add_command(subparsers, "prepare-rgbd", _prepare_rgbd)
     p.add_argument("--input", type=Path, required=True, help="folder of the sequence")
     p.add_argument("--out", type=output_folder, required=True, help="output dataset folder (new or empty)")
     p.add_argument(
@@ -175,15 +167,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --test-from: frames left out before the test stretch (default 20), so that no training "
         "frame's neighbour is a test frame",
     )
-    p.set_defaults(func=_prepare_rgbd)
 
-    p = subparsers.add_parser(
-        "cache",
-        help="decode and resize once every frame a config's train and val splits need (data.cache_dir)",
-        description="Write the frames that `posecons train` with the same --config/--set/--split-dir "
-        "reads, resized to model.height×model.width exactly as the loader does; train with "
-        "--set data.cache_dir=CACHE. An interrupted build is finished by the same command.",
-    )
+    p = add_command(subparsers, "cache", _cache)
     p.add_argument("--data-path", type=Path, required=True, help="dataset root (KITTI raw layout, or odometry root)")
     p.add_argument("--config", required=True, help="preset file or bundled name (e.g. kitti/cycle)")
     add_overrides(p, "override a config value as for train, e.g. --set model.height=96")
@@ -192,9 +177,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--out", type=output_folder, required=True, help="cache folder: new, empty, or an unfinished cache to complete"
     )
     p.add_argument("--workers", type=positive_int, default=None, help="decoding processes (default: up to 2)")
-    p.set_defaults(func=_cache)
 
-    p = subparsers.add_parser("build-split", help="build a Zhou-style train/val split from a KITTI raw tree")
+    p = add_command(subparsers, "build-split", _build_split)
     p.add_argument("--data-path", type=Path, required=True, help="KITTI raw root")
     p.add_argument("--out", type=output_folder, required=True, help="directory for train_files.txt and val_files.txt")
     p.add_argument("--static-frames", type=Path, help="SfMLearner static_frames.txt")
@@ -202,10 +186,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--val-fraction", type=fraction, default=0.1, help="share of the lines (0–1) that go to validation")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the train/val shuffle")
     p.add_argument("--ext", default=".png", help="image extension in the raw tree")
-    p.set_defaults(func=_build_split)
 
 
 def _synth(args: argparse.Namespace) -> int:
+    """write a synthetic KITTI-like dataset (raw + odometry + splits)"""
     from .splits import read_split
     from .synth import generate_synth
 
@@ -231,6 +215,7 @@ def _synth(args: argparse.Namespace) -> int:
 
 
 def _export_gt(args: argparse.Namespace) -> int:
+    """export the ground-truth depth of a split to .npz"""
     from .gt import export_gt
 
     count = export_gt(args.data_path, args.split_file, args.out, args.improved, args.improved_root, args.depth)
@@ -262,6 +247,7 @@ def _pixel_intrinsics(args: argparse.Namespace, alternative: str):
 
 
 def _prepare(args: argparse.Namespace) -> int:
+    """turn videos or frame folders into a KITTI-raw-layout dataset"""
     from .calib import read_calib_intrinsics
     from .prepare import prepare
 
@@ -290,6 +276,11 @@ def _prepare(args: argparse.Namespace) -> int:
 
 
 def _prepare_rgbd(args: argparse.Namespace) -> int:
+    """turn an RGB-D sequence (colour, depth, poses) into a dataset with depth and pose ground truth
+
+    The prepare layout of the colour frames, plus OUT/gt_depths.npz (their depth in metres, for
+    evaluate-depth --gt-kind dense) and, with poses, OUT/odometry (for evaluate-pose). Patterns are
+    relative to --input; their one * is the frame's name, which pairs a colour frame with its files."""
     from .calib import read_intrinsics
     from .rgbd import INVALID_DEPTH, RGBDSource, prepare_rgbd
 
@@ -318,6 +309,11 @@ def _prepare_rgbd(args: argparse.Namespace) -> int:
 
 
 def _cache(args: argparse.Namespace) -> int:
+    """decode and resize once every frame a config's train and val splits need (data.cache_dir)
+
+    Write the frames that `posecons train` with the same --config/--set/--split-dir reads, resized to
+    model.height×model.width exactly as the loader does; train with --set data.cache_dir=CACHE. An
+    interrupted build is finished by the same command."""
     import os
 
     from ..config import load_config, resolve_preset
@@ -335,6 +331,7 @@ def _cache(args: argparse.Namespace) -> int:
 
 
 def _build_split(args: argparse.Namespace) -> int:
+    """build a Zhou-style train/val split from a KITTI raw tree"""
     from .splits import build_split, read_static_frames, read_test_scenes, write_split
 
     static = read_static_frames(args.static_frames) if args.static_frames else set()

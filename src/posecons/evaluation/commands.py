@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import device_name, non_negative_int, output_file, output_folder, positive_float, positive_int
+from ..cli import add_command, device_name, non_negative_int, output_file, output_folder, positive_float, positive_int
 from ..errors import PoseconsError
 from ..fileio import atomic_write, write_json, write_text
 
@@ -19,11 +19,7 @@ from ..metrics import depth, pose
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the evaluation sub-commands to the ``posecons`` parser."""
-    p = subparsers.add_parser(
-        "evaluate-depth",
-        help="KITTI depth metrics (Eigen protocol) and scale consistency",
-        description="Evaluate predicted disparities (or a model) against ground-truth depth.",
-    )
+    p = add_command(subparsers, "evaluate-depth", evaluate_depth_command)
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--pred-disps", type=Path, metavar="P.npy", help="(N, h, w) float32 scaled disparities, split order"
@@ -78,13 +74,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
     p.add_argument("--plots", type=output_folder, metavar="DIR", help="plots (PNG), with --data-path also examples.png")
-    p.set_defaults(func=evaluate_depth_command)
 
-    p = subparsers.add_parser(
-        "evaluate-pose",
-        help="snippet ATE, full ATE, KITTI t_err / r_err and a constant-velocity baseline",
-        description="Evaluate predicted ego-motion against KITTI odometry poses.",
-    )
+    p = add_command(subparsers, "evaluate-pose", evaluate_pose_command)
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--pred-poses", type=Path, metavar="P.txt", help="KITTI pose file, camera → world")
     src.add_argument("--checkpoint", type=Path, metavar="CKPT", help="model checkpoint (.pt or .safetensors)")
@@ -109,17 +100,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out-dir", type=output_folder, metavar="DIR", help="write trajectories (KITTI, TUM) and a top-view plot"
     )
-    p.set_defaults(func=evaluate_pose_command)
 
-    p = subparsers.add_parser(
-        "compare",
-        help="Markdown table (paper's Table 1 layout) from depth JSONs",
-        description="Compare depth evaluations; a run directory means <run>/eval/depth.json.",
-    )
+    p = add_command(subparsers, "compare", compare_command)
     p.add_argument("results", nargs="+", type=Path, metavar="RUN_OR_JSON")
     p.add_argument("--names", nargs="+", help="row names (default: run directory or file name)")
     p.add_argument("--out", type=output_file, metavar="FILE", help="also write the table to FILE")
-    p.set_defaults(func=compare_command)
 
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
@@ -154,6 +139,9 @@ def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray]
 
 
 def evaluate_depth_command(args: argparse.Namespace) -> int:
+    """KITTI depth metrics (Eigen protocol) and scale consistency
+
+    Evaluate predicted disparities (or a model) against ground-truth depth."""
     from ..checkpoint import describe_checkpoint
     from ..data.splits import read_split
     from . import compare, evaluate
@@ -241,6 +229,9 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_pose_command(args: argparse.Namespace) -> int:
+    """snippet ATE, full ATE, KITTI t_err / r_err and a constant-velocity baseline
+
+    Evaluate predicted ego-motion against KITTI odometry poses."""
     from ..data import trajectory_io
     from . import compare, evaluate
 
@@ -285,6 +276,9 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
 
 
 def compare_command(args: argparse.Namespace) -> int:
+    """Markdown table (paper's Table 1 layout) from depth JSONs
+
+    Compare depth evaluations; a run directory means <run>/eval/depth.json."""
     from . import compare
 
     results = [compare.load_result(path) for path in args.results]

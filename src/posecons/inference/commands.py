@@ -8,18 +8,12 @@ import json
 import sys
 from pathlib import Path
 
-from ..cli import device_name, non_negative_float, output_file, output_folder, positive_float, positive_int
+from ..cli import add_command, device_name, non_negative_float, output_file, output_folder, positive_float, positive_int
 from .media import DEFAULT_FPS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "predict",
-        help="depth, ego-motion and point clouds for images or a video",
-        description="Depth for every frame (.npy, 16-bit PNG, colour PNG, side-by-side "
-        "MP4 for video), a trajectory (KITTI and TUM) and optional point "
-        "clouds. Outputs are staged inside OUT and moved into place at the end.",
-    )
+    p = add_command(subparsers, "predict", predict_command)
     p.add_argument(
         "--checkpoint",
         required=True,
@@ -74,9 +68,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "follows real scale changes sooner",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=predict_command)
 
-    e = subparsers.add_parser("export", help="depth and pose networks to ONNX (verified) and safetensors")
+    e = add_command(subparsers, "export", export_command)
     e.add_argument("--checkpoint", required=True, type=Path, help="checkpoint (.pt or .safetensors)")
     e.add_argument("--out", required=True, type=output_folder, help="output folder: new, empty, or an earlier export")
     e.add_argument(
@@ -85,21 +78,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=1e-4,
         help="largest accepted |ONNX Runtime − PyTorch| on sample inputs (disparity / pose units)",
     )
-    e.set_defaults(func=export_command)
 
-    m = subparsers.add_parser(
-        "import-monodepth2",
-        help="a Monodepth2 model folder → a posecons checkpoint (same networks, same outputs)",
-        description="Read a Monodepth2 model folder (encoder.pth, depth.pth, and pose_encoder.pth + pose.pth "
-        "of a mono or mono+stereo model) into a posecons checkpoint for evaluate-depth, evaluate-pose, "
-        "predict, export or train --init-from. A stereo-only model gives its depth network only.",
-    )
+    m = add_command(subparsers, "import-monodepth2", import_monodepth2_command)
     m.add_argument("folder", type=Path, help="Monodepth2 model folder, e.g. models/mono_640x192")
     m.add_argument("--out", required=True, type=output_file, help="checkpoint to write (.pt)")
-    m.set_defaults(func=import_monodepth2_command)
 
 
 def predict_command(args: argparse.Namespace) -> int:
+    """depth, ego-motion and point clouds for images or a video
+
+    Depth for every frame (.npy, 16-bit PNG, colour PNG, side-by-side MP4 for video), a trajectory
+    (KITTI and TUM) and optional point clouds. Outputs are staged inside OUT and moved into place at the
+    end."""
     from . import (  # the package's lazy names (not the submodule)
         PredictOptions,
         load_predictor,
@@ -146,6 +136,7 @@ def predict_command(args: argparse.Namespace) -> int:
 
 
 def export_command(args: argparse.Namespace) -> int:
+    """depth and pose networks to ONNX (verified) and safetensors"""
     from .export import export_model
 
     info = export_model(args.checkpoint, args.out, tolerance=args.tolerance)
@@ -155,6 +146,11 @@ def export_command(args: argparse.Namespace) -> int:
 
 
 def import_monodepth2_command(args: argparse.Namespace) -> int:
+    """a Monodepth2 model folder → a posecons checkpoint (same networks, same outputs)
+
+    Read a Monodepth2 model folder (encoder.pth, depth.pth, and pose_encoder.pth + pose.pth of a mono or
+    mono+stereo model) into a posecons checkpoint for evaluate-depth, evaluate-pose, predict, export or
+    train --init-from. A stereo-only model gives its depth network only."""
     from ..monodepth2 import import_monodepth2
 
     print(f"imported {import_monodepth2(args.folder, args.out)} → {args.out}")  # says when only depth is

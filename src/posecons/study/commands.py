@@ -5,17 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..cli import add_accelerator, non_negative_int, output_file, output_folder, positive_int
+from ..cli import add_accelerator, add_command, non_negative_int, output_file, output_folder, positive_int
 from ..errors import PoseconsError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "study",
-        help="variants × seeds → runs → evaluation → results report with paired differences",
-        description="Train every (variant, seed) of a study spec, evaluate each run's last weights, and "
-        "write a report; rerunning it skips finished runs and resumes interrupted ones.",
-    )
+    p = add_command(subparsers, "study", study_command)
     p.add_argument("--spec", help="study spec: a YAML file or a bundled name (study/synth, study/kitti_gpu)")
     p.add_argument("--out", type=output_folder, help="study folder: data, runs, results/*.json, results.md")
     p.add_argument(
@@ -43,10 +38,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "on a 2-core CPU, 2 get about 1.2× the steps of 1",
     )
     p.add_argument("--quiet", action="store_true", help="no per-step progress bar while a run trains")
-    p.set_defaults(func=study_command)
 
 
 def study_command(args: argparse.Namespace) -> int:
+    """variants × seeds → runs → evaluation → results report with paired differences
+
+    Train every (variant, seed) of a study spec, evaluate each run's last weights, and write a report;
+    rerunning it skips finished runs and resumes interrupted ones."""
     if args.report_only:
         return _report_only(args)
     if args.results is not None:

@@ -8,19 +8,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..cli import add_accelerator, add_overrides, non_negative_int, output_folder, positive_int
+from ..cli import add_accelerator, add_command, add_overrides, non_negative_int, output_folder, positive_int
 from ..config import load_config, resolve_preset
 from ..errors import PoseconsError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser(
-        "train",
-        help="train depth and pose networks from a preset",
-        description="Train a run. Multi-GPU on one node: --devices N (torchrun is started "
-        "for you); several nodes: --nodes M --rdzv-endpoint HOST:PORT on each node. Ctrl-C (or SIGTERM) "
-        "saves the run's state at the end of the step; the same command with --resume continues it.",
-    )
+    p = add_command(subparsers, "train", train_command)
     p.add_argument("--config", help="preset file or bundled name (e.g. kitti/cycle); default on --resume: the run's")
     p.add_argument("--data-path", required=True, help="dataset root (KITTI raw layout, or odometry root)")
     p.add_argument("--out", type=output_folder, required=True, help="run directory")
@@ -47,14 +41,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(default: train.precision)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=train_command)
 
-    d = subparsers.add_parser("demo", help="synthetic data → train on the CPU → evaluate → report with plots")
+    d = add_command(subparsers, "demo", demo_command)
     d.add_argument(
         "--out", type=output_folder, default="runs/demo", help="folder for data, run, evaluation and report.md"
     )
     d.add_argument("--seed", type=non_negative_int, default=0, help="seed of the synthetic data and of training")
-    d.set_defaults(func=demo_command)
 
 
 def _config(args: argparse.Namespace):
@@ -93,6 +85,11 @@ def _launch_torchrun(args: argparse.Namespace) -> int:
 
 
 def train_command(args: argparse.Namespace) -> int:
+    """train depth and pose networks from a preset
+
+    Train a run. Multi-GPU on one node: --devices N (torchrun is started for you); several nodes:
+    --nodes M --rdzv-endpoint HOST:PORT on each node. Ctrl-C (or SIGTERM) saves the run's state at the
+    end of the step; the same command with --resume continues it."""
     config = _config(args)  # validate before anything starts, also before launching workers
     if (args.devices > 1 or args.nodes > 1) and "WORLD_SIZE" not in os.environ:
         return _launch_torchrun(args)
@@ -113,6 +110,7 @@ def train_command(args: argparse.Namespace) -> int:
 
 
 def demo_command(args: argparse.Namespace) -> int:
+    """synthetic data → train on the CPU → evaluate → report with plots"""
     from .demo import run_demo
 
     summary = run_demo(Path(args.out), seed=args.seed)
