@@ -98,10 +98,12 @@ def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_p
     assert not (out / "results" / "cyc_seed3.json").exists()
 
 
-def test_camera_height_scales_each_drive_by_its_road_plane(tmp_path):
-    """Two drives whose predictions are the true road-plane depth × 2 and × 0.5, at a quarter of the
-    ground truth's size: each drive's factor is the inverse (the fitted heights' ratio). Caught: the
-    ratio inverted, the ground truth's K used for the smaller prediction, one factor for all drives."""
+def test_camera_height_scales_each_drive_or_frame_by_its_road_plane(tmp_path):
+    """Two drives whose predictions are the true road-plane depth times a known factor per frame, at a
+    quarter of the ground truth's size: one factor per drive is the median inverse over its first two
+    frames, a window of 1 each frame's own inverse, a window of 3 the inverse of the centred median
+    (shortened at a drive's ends). Caught: the ratio inverted, the ground truth's K used for the smaller
+    prediction, one factor for all drives, the window not centred, a window running into the next drive."""
     from posecons.data.calib import format_calib, normalised_to_pixel, raw_intrinsics
     from posecons.data.splits import SplitLine
     from posecons.data.synth.rig import Rig
@@ -121,6 +123,11 @@ def test_camera_height_scales_each_drive_by_its_road_plane(tmp_path):
 
     lines = [SplitLine(f"2011_09_26/d{d}", f, "l") for d in (0, 1) for f in range(3)]
     gts = [road(128, 384)] * 6
-    disps = np.stack([1 / (road(32, 96) * (2.0 if line.folder.endswith("0") else 0.5)) for line in lines])
-    factors = tool.drive_scales(disps, gts, lines, tmp_path, frames=2)
-    np.testing.assert_allclose(factors, [0.5] * 3 + [2.0] * 3, rtol=2e-3)
+    scale = [2.0, 4.0, 2.0, 0.5, 0.5, 1.0]
+    disps = np.stack([1 / (road(32, 96) * s) for s in scale])
+    heights = tool.frame_heights(disps, gts, lines, tmp_path)
+    np.testing.assert_allclose(heights[0], 1.65, rtol=2e-3)
+    np.testing.assert_allclose(heights[1], 1.65 * np.array(scale), rtol=2e-3)
+    expected = {None: [0.375] * 3 + [2.0] * 3, 1: [1 / s for s in scale], 3: [1 / 3, 0.5, 1 / 3, 2.0, 2.0, 4 / 3]}
+    for window, want in expected.items():
+        np.testing.assert_allclose(tool.drive_scales(*heights, lines, 2, window), want, rtol=2e-3, err_msg=f"{window}")

@@ -3,7 +3,10 @@ drives, and each drive's scale is set once from the camera's height above the ro
 first N frames (what ``predict --camera-height`` does), then abs rel is measured with that one scale
 and no ground-truth scaling, beside per-frame and per-drive median scaling, and with the test-time
 stabiliser applied before calibrating ("calibrate once + stabilise"). The true height is the same fit
-on the ground truth of the same frames, so the method's error is the network's, not the fit's.
+on the ground truth of the same frames, so the method's error is the network's, not the fit's. With
+--windows, every frame is also scaled by its own road plane (the predicted height a centred median over
+K frames, against that one true height): the σ/μ left after it, and its abs rel with no ground-truth
+scaling — a per-frame scale anchored to the camera's height cannot drift, which the stabiliser's does.
 
     python experiments/tools/camera_height.py study/synth_fast runs/study_fast baseline/0 cyc/0 [--frames 10]
 """
@@ -27,24 +30,44 @@ from posecons.study.runner import prepare_data
 from posecons.study.spec import load_spec
 
 
-def drive_scales(disps: np.ndarray, gts: list[np.ndarray], lines, data_path: Path, frames: int) -> np.ndarray:
-    """(N,) factor on each frame's predicted depth: per drive, the median over its first ``frames``
-    frames of (height fitted on the ground truth) / (height fitted on the prediction)."""
+def frame_heights(disps: np.ndarray, gts: list[np.ndarray], lines, data_path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) camera height above the road fitted on each frame's ground truth and on its prediction
+    (NaN where no plane is found)."""
+
+    def height(depth: np.ndarray, k: np.ndarray) -> float:
+        try:
+            return camera_height(depth, normalised_to_pixel(k, *depth.shape))
+        except PoseconsError:
+            return np.nan
+
+    true, predicted = np.full(len(lines), np.nan), np.full(len(lines), np.nan)
+    for i, line in enumerate(lines):
+        k = raw_intrinsics(Path(data_path) / Path(line.folder).parent, SIDE_TO_CAMERA[line.side])
+        true[i], predicted[i] = height(gts[i], k), height(1.0 / disps[i], k)
+    return true, predicted
+
+
+def drive_scales(true: np.ndarray, predicted: np.ndarray, lines, frames: int, window: int | None) -> np.ndarray:
+    """(N,) factor on each frame's predicted depth. Each drive's camera height is the median of the
+    heights fitted on the ground truth of its first ``frames`` frames (what a user would measure once).
+    window None: one factor per drive, the median over those frames of true / predicted height (what
+    ``predict --camera-height`` does); window K: each frame's own factor, that height over the median
+    predicted height of the K frames centred on it (K = 1: the frame alone)."""
     factors = np.ones(len(lines))
     for _, group in itertools.groupby(range(len(lines)), key=lambda i: lines[i].folder):
-        index = list(group)
-        line = lines[index[0]]
-        k = raw_intrinsics(Path(data_path) / Path(line.folder).parent, SIDE_TO_CAMERA[line.side])
-        ratios = [
-            camera_height(gts[i], normalised_to_pixel(k, *gts[i].shape))
-            / camera_height(1.0 / disps[i], normalised_to_pixel(k, *disps.shape[1:]))
-            for i in index[:frames]
-        ]
-        factors[index] = np.median(ratios)
+        index = np.array(list(group))
+        if window is None:
+            factors[index] = np.nanmedian(true[index[:frames]] / predicted[index[:frames]])
+            continue
+        h = np.nanmedian(true[index[:frames]])
+        for j, i in enumerate(index):
+            factors[i] = h / np.nanmedian(predicted[index[max(0, j - window // 2) : j + window // 2 + 1]])
     return factors
 
 
-def camera_height_row(spec: str, study: Path, variant: str, seed: int, frames: int) -> dict[str, float]:
+def camera_height_row(
+    spec: str, study: Path, variant: str, seed: int, frames: int, windows: list[int]
+) -> dict[str, float]:
     data = prepare_data(load_spec(spec), study)
     predictor = load_predictor(study / "runs" / variant / f"seed{seed}" / "checkpoints" / "last.pt")
     gts, _ = load_gt(data.gt)
@@ -54,12 +77,13 @@ def camera_height_row(spec: str, study: Path, variant: str, seed: int, frames: i
     def scored(d: np.ndarray, scaling: str) -> dict:
         return evaluate.evaluate_depth(d, gts, data.split, data.gt_kind, scaling=scaling, depth_range=data.depth_range)
 
-    camera = drive_scales(disps, gts, data.split, data.train_path, frames)
-    camera_stable = drive_scales(stable, gts, data.split, data.train_path, frames)
+    true, predicted = frame_heights(disps, gts, data.split, data.train_path)
+    camera = drive_scales(true, predicted, data.split, frames, None)
+    camera_stable = drive_scales(*frame_heights(stable, gts, data.split, data.train_path), data.split, frames, None)
     frame = scored(disps, "frame")
     scales, names = np.asarray(frame["scales"]), np.array([line.folder for line in data.split])
     drives = [names == name for name in dict.fromkeys(names)]
-    return {
+    row = {
         "abs_rel_frame": frame["abs_rel"],
         "abs_rel_drive": scored(disps, "sequence")["abs_rel"],
         "abs_rel_camera": scored(disps / camera[:, None, None].astype(np.float32), "none")["abs_rel"],
@@ -70,6 +94,11 @@ def camera_height_row(spec: str, study: Path, variant: str, seed: int, frames: i
         "camera_over_median": float(np.mean([camera[i].mean() / np.nanmedian(scales[i]) for i in drives])),
         "sigma_mu": frame["scale_cv"],
     }
+    for window in windows:  # every frame scaled by its own road plane: σ/μ of what is left, and metric abs rel
+        rescaled = disps / drive_scales(true, predicted, data.split, frames, window)[:, None, None].astype(np.float32)
+        row[f"sigma_mu_camera_w{window}"] = scored(rescaled, "frame")["scale_cv"]
+        row[f"abs_rel_camera_w{window}"] = scored(rescaled, "none")["abs_rel"]
+    return row
 
 
 def main() -> None:
@@ -78,13 +107,20 @@ def main() -> None:
     p.add_argument("study", type=Path, help="the study folder (its data/ and runs/)")
     p.add_argument("runs", nargs="+", help="VARIANT/SEED, e.g. baseline/0")
     p.add_argument("--frames", type=int, default=10, help="frames of each drive the height is fitted on")
+    p.add_argument(
+        "--windows",
+        type=int,
+        nargs="*",
+        default=[1, 9],
+        help="also scale every frame by its own road plane, the predicted height a median over this many frames",
+    )
     args = p.parse_args()
     for run in args.runs:
         variant, _, seed = run.partition("/")
         if not seed.isdigit():
             p.exit(2, f"error: {run}: give a run as VARIANT/SEED, e.g. baseline/0\n")
         try:
-            row = camera_height_row(args.spec, args.study, variant, int(seed), args.frames)
+            row = camera_height_row(args.spec, args.study, variant, int(seed), args.frames, args.windows)
         except PoseconsError as exc:  # e.g. a run whose checkpoint is not on this machine
             p.exit(2, f"error: {exc}\n")
         print(f"{run}: " + ", ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
