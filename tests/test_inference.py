@@ -138,8 +138,8 @@ def test_predict_folder_writes_every_frame_at_original_size(base_run):
         png = np.asarray(Image.open(base_run / "depth_png" / f"{name}.png"))
         assert png.dtype == np.uint16 and png.shape == (H, W)
         np.testing.assert_array_equal(png, np.clip(np.round(depth * 256), 0, 65535).astype(np.uint16))
-        color = Image.open(base_run / "depth_color" / f"{name}.png")
-        assert color.size == (W, H) and color.mode == "RGB"
+        color = Image.open(base_run / "depth_color" / f"{name}.jpg")
+        assert color.size == (W, H) and color.mode == "RGB" and color.format == "JPEG"
     assert sorted(p.stem for p in (base_run / "depth").iterdir()) == names
     poses = read_kitti_poses(base_run / "trajectory_kitti.txt")
     stamps, tum = read_tum(base_run / "trajectory_tum.txt")
@@ -380,7 +380,7 @@ def test_colour_range_is_one_for_the_sequence(frames_dir, tmp_path):
     range colours the sequence; per-frame normalisation (the flicker users saw) paints them all alike. Caught by mutation:
     colour_range of each frame."""
     predict(ApproachingWallPredictor(), frames_dir, tmp_path / "out", PredictOptions(batch_size=4, progress=False))
-    colours = [np.asarray(Image.open(p))[:, -1] for p in sorted((tmp_path / "out" / "depth_color").glob("*.png"))]
+    colours = [np.asarray(Image.open(p))[:, -1] for p in sorted((tmp_path / "out" / "depth_color").glob("*.jpg"))]
     assert len(colours) >= 4 and all(not np.array_equal(a, b) for a, b in zip(colours[:4], colours[1:4]))
 
 

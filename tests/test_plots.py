@@ -1,6 +1,8 @@
 """Every figure of posecons.plots is written as a PNG from small inputs; colorize maps to uint8 RGB."""
 
+import matplotlib
 import numpy as np
+import pytest
 
 from posecons import plots
 
@@ -37,3 +39,19 @@ def test_colorize_gives_rgb_bytes_of_the_same_size():
     color = plots.colorize(np.linspace(0.01, 1.0, 12).reshape(3, 4))
     assert color.shape == (3, 4, 3) and color.dtype == np.uint8
     assert not np.array_equal(color[0, 0], color[-1, -1])  # near and far get different colours
+
+
+@pytest.mark.parametrize("cmap", ["magma", "viridis"])
+def test_colorize_gives_the_colormaps_own_bytes(cmap):
+    """The colour table gives what the colormap itself gives through (colours × 255) as uint8, at the
+    ends of the range, on and beside each bin's edge, outside the range (clipped) and for NaN (black).
+    Caught: rounding the bin (× (N − 1)), the top value past the table, NaN left to the table."""
+    colours = matplotlib.colormaps[cmap]
+    edges = np.arange(colours.N + 1) / colours.N
+    values = np.concatenate(
+        [edges, edges - 1e-9, edges + 1e-9, [-0.5, 1.5, np.nan], np.random.default_rng(0).random(500)]
+    )
+    got = plots.colorize(values[None], cmap=cmap, limits=(0.0, 1.0))
+    want = (colours(np.clip(values, 0, 1))[..., :3] * 255).astype(np.uint8)
+    want[np.isnan(values)] = 0
+    np.testing.assert_array_equal(got[0], want)

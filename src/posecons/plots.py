@@ -6,6 +6,7 @@ top view of a trajectory, examples of depth beside its ground truth. Nothing els
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import cache
 from pathlib import Path
 
 import matplotlib
@@ -208,13 +209,25 @@ def colour_range(disparity: np.ndarray) -> tuple[float, float]:
     return float(disparity.min()), float(np.percentile(disparity, 95))
 
 
+@cache
+def _colour_table(cmap: str) -> np.ndarray:
+    """(N, 3) uint8: the colormap's N colours as ``colorize`` writes them."""
+    colours = matplotlib.colormaps[cmap]
+    return (colours(np.arange(colours.N))[:, :3] * 255).astype(np.uint8)
+
+
 def colorize(disparity: np.ndarray, cmap: str = COLORMAP, limits: tuple[float, float] | None = None) -> np.ndarray:
     """(H, W) disparity → (H, W, 3) uint8 over ``limits`` (default: :func:`colour_range` of this
-    frame). A sequence passes one range for all frames, so that colours do not flicker between frames
-    and a change of scale shows as one."""
+    frame), NaN black. A sequence passes one range for all frames, so that colours do not flicker
+    between frames and a change of scale shows as one. The colormap's own lookup (value × N, the top
+    value in the last bin) through a table of its colours: the same bytes, twice as fast."""
     lo, hi = limits or colour_range(disparity)
     norm = np.clip((disparity - lo) / max(hi - lo, 1e-12), 0, 1)
-    return (matplotlib.colormaps[cmap](norm)[..., :3] * 255).astype(np.uint8)
+    table = _colour_table(cmap)
+    nan = np.isnan(norm)
+    rgb = table[np.minimum(np.where(nan, 0, norm * len(table)).astype(np.intp), len(table) - 1)]
+    rgb[nan] = 0
+    return rgb
 
 
 def plot_depth_examples(rows: Sequence[dict], path: str | Path) -> Path:
