@@ -62,6 +62,12 @@ fi
 part train-loop-fp32 "$PY" benchmarks/train_loop.py --data "$DATA" --device "$DEV" --variants baseline all "${LOOP[@]}"
 part train-loop-bf16 "$PY" benchmarks/train_loop.py --data "$DATA" --device "$DEV" --variants baseline all \
   --no-loader-only --set train.precision=bf16 "${LOOP[@]}"
+if ((DRY)); then  # compiling takes a minute on a CPU; tests/test_model.py covers the compiled losses
+  ROWS+=("| train-loop-bf16-compiled | not in a dry run | 0 |")
+else
+  part train-loop-bf16-compiled "$PY" benchmarks/train_loop.py --data "$DATA" --device "$DEV" --variants baseline \
+    --no-loader-only --set train.precision=bf16 --set train.compile_losses=true "${LOOP[@]}"
+fi
 part depth-net "$PY" benchmarks/inference.py --device "$DEV" "${NET[@]}"
 part predict "${POSECONS[@]}" predict --checkpoint "$OUT/bf16/checkpoints/last.pt" --input "$DRIVE" --out "$OUT/predict" \
   --device "$DEV" --quiet
@@ -74,7 +80,8 @@ echo
 echo "| part | status | seconds |"
 echo "|---|---|---|"
 printf '%s\n' "${ROWS[@]}"
-for log in train-loop-fp32 train-loop-bf16 depth-net; do
+for log in train-loop-fp32 train-loop-bf16 train-loop-bf16-compiled depth-net; do
+  [[ -f $OUT/$log.log ]] || continue
   echo
   echo "$log:"
   grep -E '^\||threads|GiB' "$OUT/$log.log"
