@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from posecons.cli import positive_int
 from posecons.data.calib import normalised_to_pixel, raw_intrinsics
 from posecons.data.gt import load_gt
 from posecons.data.splits import SIDE_TO_CAMERA
@@ -109,7 +110,7 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=10, help="frames of each drive the height is fitted on")
     p.add_argument(
         "--windows",
-        type=int,
+        type=positive_int,
         nargs="*",
         default=[1, 9],
         help="also scale every frame by its own road plane, the predicted height a median over this many frames",
