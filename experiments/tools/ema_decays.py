@@ -26,7 +26,7 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 import posecons.training.trainer as trainer_module
 from posecons.errors import PoseconsError
 from posecons.fileio import atomic_write, write_json
-from posecons.study.runner import evaluate_weights, prepare_data, raw_weights_result, result_name
+from posecons.study.runner import environment, evaluate_weights, prepare_data, raw_weights_result, result_name
 from posecons.study.spec import load_spec
 
 
@@ -72,7 +72,7 @@ def run(spec_name: str, study: Path, out: Path, variant: str, seed: int, decays:
         atomic_write(weights[d], lambda tmp, copy=copy: torch.save(copy, tmp))
     for d, file in sorted(weights.items()):
         result = {"variant": variant, "seed": seed, "ema_decay": d, "steps": state["step"], "weights": str(file)}
-        result.update(evaluate_weights(file, data), **raw_weights_result(last, data))
+        result.update(evaluate_weights(file, data), **raw_weights_result(last, data), environment=environment("auto"))
         write_json(out / f"ema{d:g}" / "results" / result_name(variant, seed), result)
         print(
             f"{variant} seed {seed}, EMA {d:g}: σ/μ {result['depth']['frame']['scale_cv']:.4f}, "
