@@ -1,5 +1,6 @@
-"""experiments/tools/at_steps.py: a study run's weights are kept at the asked steps only, without the training
-state, once per checkpoint write; a folder that is no study is one line and exit status 2."""
+"""The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
+once per checkpoint write; adopt.py, camera_height.py and ema_decays.py as their tests say; a folder
+that is no study is one line and exit status 2."""
 
 from __future__ import annotations
 
@@ -131,3 +132,35 @@ def test_camera_height_scales_each_drive_or_frame_by_its_road_plane(tmp_path):
     expected = {None: [0.375] * 3 + [2.0] * 3, 1: [1 / s for s in scale], 3: [1 / 3, 0.5, 1 / 3, 2.0, 2.0, 4 / 3]}
     for window, want in expected.items():
         np.testing.assert_allclose(tool.drive_scales(*heights, lines, 2, window), want, rtol=2e-3, err_msg=f"{window}")
+
+
+def test_extra_emas_follow_their_formula_and_leave_the_trajectory_alone(make_synth, tmp_path, monkeypatch):
+    """experiments/tools/ema_decays.py: an EMA of the run's own decay equals the run's EMA, one of another
+    decay is d·w₁ + (1 − d)·w₂ of the two steps' raw weights, and the raw weights are those of the same
+    run without the extra EMAs, to the bit. Caught: an extra EMA updated before the optimiser step or
+    not at all, the decays swapped, an extra update that draws random numbers or touches the weights."""
+    import posecons.training.trainer as trainer_module
+    from posecons.config import load_config
+    from tiny import TINY_MODEL
+
+    load = importlib.util.spec_from_file_location("ema_decays", TOOLS / "ema_decays.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    data = make_synth(2, 16, 192, 64, 3)
+    own, other = 0.9, 0.5
+    overrides = [*TINY_MODEL, f"train.ema_decay={own}", "train.max_steps=2", "train.val_every=off", "train.lr=1e-3"]
+    trainer_module.train(load_config(overrides=overrides), data, tmp_path / "plain", quiet=True)
+    monkeypatch.setattr(trainer_module.Trainer, "__init__", trainer_module.Trainer.__init__)  # restored after
+    extra = tool.track_extra_emas([own, other])
+    trainer_module.train(load_config(overrides=overrides), data, tmp_path / "tracked", quiet=True)
+
+    plain, tracked = (load_checkpoint(tmp_path / r / "checkpoints" / "last.pt") for r in ("plain", "tracked"))
+    for k, w2 in tracked["raw_model"].items():
+        assert torch.equal(w2, plain["raw_model"][k]), k
+    same, mixed = extra[own].module.state_dict(), extra[other].module.state_dict()
+    for k, ema in tracked["model"].items():
+        assert torch.equal(same[k], ema), k
+        if ema.is_floating_point():  # parameters and BatchNorm statistics: w₁ from the run's own EMA
+            w2 = tracked["raw_model"][k]
+            w1 = (ema - (1 - own) * w2) / own
+            assert torch.allclose(mixed[k], other * w1 + (1 - other) * w2, rtol=1e-4, atol=1e-6), k
