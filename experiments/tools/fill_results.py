@@ -4,7 +4,7 @@ the secondary rows, the weight EMA against each run's raw weights (per run and p
 baseline's seed-to-seed spread. Run from the repository root after regenerating the report:
 
     posecons study --report-only --spec study/synth_fast --variants baseline id fb cyc all \
-        --seeds 0 1 2 3 4 5 --out runs/study_fast --report docs/results/study_fast.md
+        --seeds 0 1 2 3 4 5 6 7 --out runs/study_fast --report docs/results/study_fast.md
     python experiments/tools/fill_results.py runs/study_fast/results
 """
 
@@ -22,7 +22,8 @@ Source: [results/study_fast.md](results/study_fast.md), study/synth_fast (bf16 a
 of decay 0.99, 500 steps, one compute thread, AMD EPYC with AVX-512 BF16), rebuilt from the committed
 JSONs in docs/results/study_fast/json/. Seeds done ({NRUNS} runs): {SEEDS}. Seeds 3 and 4 were
 trained on 2026-12-03 and taken in after a rerun reproduced one of them to the last digit (§8); the
-others were trained on 2026-12-04. Every run's baseline partner computed alike, so every seed pairs.
+others were trained on 2026-12-04 and, from seed 6 on, 2026-12-05, all with the code of commit
+fc1644a. Every run's baseline partner computed alike, so every seed pairs.
 
 Depth, paper Table 1 layout (frame-median scaling, Garg crop):
 
