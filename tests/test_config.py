@@ -130,3 +130,11 @@ def test_every_preset_the_readme_names_resolves_here_and_under_configs():
 def test_unknown_preset_lists_the_bundled_ones():
     with pytest.raises(PoseconsError, match="kitti/cycle"):
         resolve_preset("kitti/cycel")
+
+
+def test_every_preset_computes_in_auto_precision_but_the_fp32_study():
+    """The precision default (the throughput issue, item 0): every bundled preset resolves to "auto" — bf16
+    where the device has it natively — except synth/study, whose runs are the fp32 study's."""
+    precisions = {name: load_config(resolve_preset(name)).train.precision for name in preset_names()}
+    assert precisions.pop("synth/study") == "32"
+    assert set(precisions.values()) == {"auto"}, precisions
