@@ -49,6 +49,7 @@ def test_a_folder_without_runs_is_one_line_and_exit_2(tmp_path):
     for argv in (
         ["at_steps.py", "keep", str(tmp_path), str(tmp_path / "w"), "--steps", "5"],
         ["step_times.py", str(tmp_path)],
+        ["ema_decays.py", "study/synth_fast", str(tmp_path), str(tmp_path / "o"), "--seed", "0", "--decays", "0.9"],
     ):
         done = subprocess.run([sys.executable, str(TOOLS / argv[0]), *argv[1:]], capture_output=True, text=True)
         assert done.returncode == 2 and done.stderr.strip() == f"error: {tmp_path}: not a study folder (no runs/ in it)"
@@ -137,8 +138,8 @@ def test_camera_height_scales_each_drive_or_frame_by_its_road_plane(tmp_path):
 def test_extra_emas_follow_their_formula_and_leave_the_trajectory_alone(make_synth, tmp_path, monkeypatch):
     """experiments/tools/ema_decays.py: an EMA of the run's own decay equals the run's EMA, one of another
     decay is d·w₁ + (1 − d)·w₂ of the two steps' raw weights, and the raw weights are those of the same
-    run without the extra EMAs, to the bit. Caught: an extra EMA updated before the optimiser step or
-    not at all, the decays swapped, an extra update that draws random numbers or touches the weights."""
+    run without the extra EMAs, to the bit. Caught: an extra EMA never updated, the decays swapped, an
+    extra update that draws random numbers."""
     import posecons.training.trainer as trainer_module
     from posecons.config import load_config
     from tiny import TINY_MODEL
@@ -164,3 +165,26 @@ def test_extra_emas_follow_their_formula_and_leave_the_trajectory_alone(make_syn
             w2 = tracked["raw_model"][k]
             w1 = (ema - (1 - own) * w2) / own
             assert torch.allclose(mixed[k], other * w1 + (1 - other) * w2, rtol=1e-4, atol=1e-6), k
+
+
+def test_ema_decays_refuses_bad_decays_and_an_existing_run_in_one_line(tmp_path):
+    """A decay outside (0, 1) and a run folder that exists (a resume would lack the extra EMAs; an
+    earlier run is not deleted) are each one line and exit status 2, and the folder is left as it was."""
+    (tmp_path / "study" / "runs").mkdir(parents=True)
+    kept = tmp_path / "out" / "runs" / "baseline" / "seed0" / "checkpoints" / "last.pt"
+    kept.parent.mkdir(parents=True)
+    kept.write_bytes(b"weights")
+    base = [
+        sys.executable,
+        str(TOOLS / "ema_decays.py"),
+        "study/synth_fast",
+        str(tmp_path / "study"),
+        str(tmp_path / "out"),
+    ]
+    for extra, message in (
+        (["--decays", "1.5"], "error: --decays: each must be between 0 and 1, got [1.5]"),
+        (["--decays", "0.9"], f"error: {kept.parents[1]} exists: remove it to train this run again"),
+    ):
+        done = subprocess.run([*base, "--seed", "0", *extra], capture_output=True, text=True)
+        assert done.returncode == 2 and done.stderr.strip() == message
+    assert kept.read_bytes() == b"weights"

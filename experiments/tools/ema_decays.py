@@ -9,14 +9,13 @@ slower EMA lower σ/μ further?).
     python experiments/tools/ema_decays.py study/synth_fast runs/study_fast runs/ema --seed 0 --decays 0.995 0.998
 
 Run it with the pinned code that trained the study, at the study's thread count (OMP_NUM_THREADS). An
-interrupted run starts again from scratch: the extra EMAs are not in ``last.pt``.
+interrupted run is not resumed (the extra EMAs are not in ``last.pt``): remove its folder and start again.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -39,7 +38,7 @@ def track_extra_emas(decays: list[float]) -> dict[float, AveragedModel]:
     def init(self, *args, **kwargs):
         build(self, *args, **kwargs)
         if self.ema is None:
-            raise PoseconsError("the run has no weight EMA (train.ema_decay=0): nothing to time the extra ones by")
+            raise PoseconsError("the run keeps no weight EMA (train.ema_decay=0) to check the extra ones against")
         for d in decays:
             extra[d] = AveragedModel(self.model, multi_avg_fn=get_ema_multi_avg_fn(d), use_buffers=True)
         own = self.ema.update_parameters
@@ -56,11 +55,12 @@ def track_extra_emas(decays: list[float]) -> dict[float, AveragedModel]:
 
 
 def run(spec_name: str, study: Path, out: Path, variant: str, seed: int, decays: list[float]) -> None:
+    run_dir = out / "runs" / variant / f"seed{seed}"
+    if run_dir.exists():  # a resumed trajectory would lack the extra EMAs, and an earlier run is kept
+        raise PoseconsError(f"{run_dir} exists: remove it to train this run again")
     spec = load_spec(spec_name)
     data = prepare_data(spec, study)
     config = spec.config(variant, seed)
-    run_dir = out / "runs" / variant / f"seed{seed}"
-    shutil.rmtree(run_dir, ignore_errors=True)  # a fresh trajectory: a resumed one would lack the extra EMAs
     extra = track_extra_emas(decays)
     trainer_module.train(config, data.train_path, run_dir, quiet=True)
     last = run_dir / "checkpoints" / "last.pt"
@@ -101,6 +101,8 @@ def main() -> None:
     p.add_argument("--seed", type=int, required=True)
     p.add_argument("--decays", type=float, nargs="+", required=True)
     args = p.parse_args()
+    if not (args.study / "runs").is_dir():
+        p.exit(2, f"error: {args.study}: not a study folder (no runs/ in it)\n")
     if any(not 0 < d < 1 for d in args.decays):
         p.exit(2, f"error: --decays: each must be between 0 and 1, got {args.decays}\n")
     try:
