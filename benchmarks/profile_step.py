@@ -8,6 +8,14 @@ whose per-operator cost inflates a step of many small operators, over the convol
     python benchmarks/profile_step.py --bf16                        # the paper's 640×192, batch 12
     python benchmarks/profile_step.py --bf16 --preset synth/study   # the study setting (192×64, batch 8)
     python benchmarks/profile_step.py --bf16 --compile-losses       # with train.compile_losses
+    python benchmarks/profile_step.py --bf16 --networks-only        # the floor no loss can go below
+
+--networks-only replaces the view-synthesis losses by the plain mean of the networks' outputs: the
+step is then the networks' forward and backward and Adam alone, and its ratio is the floor that the
+networks' own non-convolution work (BatchNorm, activations, pooling, resizing, concatenation) sets —
+however cheap the losses were made. Two ways to cut that work, measured rather than used in training:
+--channels-last (the networks' weights and inputs in the channels-last layout) and --compile-networks
+(torch.compile of the depth network and the pose encoder; the first step compiles).
 
 Random frames (train_step.py's batch); run it on an otherwise idle machine.
 """
@@ -94,12 +102,34 @@ def part_of(event) -> str:
     return f"{event.name} ({phase})"
 
 
+def outputs_mean(frames, K, disps: dict, poses: dict, masks=None) -> tuple[dict, None]:
+    """In place of the view-synthesis losses: a loss that reaches every disparity and pose, at the
+    cost of a mean each."""
+    total = sum(d.float().mean() for d in disps.values()) + sum(T.mean() for T in poses.values())
+    return {"photometric": total, "smoothness": torch.zeros(()), "total": total}, None
+
+
+def channels_last_input(forward):
+    def run(images: torch.Tensor, *args):
+        return forward(images.contiguous(memory_format=torch.channels_last), *args)
+
+    return run
+
+
 def profile_steps(constraints: list[str], args: argparse.Namespace) -> tuple[dict[str, float], float, float]:
     """Milliseconds per step of each part, the step's wall time in ms under the profiler, and its median
     wall time in ms without it (the profiler's cost per operator inflates a step of many small ones)."""
     device, cfg = torch.device(args.device), setting(constraints, args)
     model, batch = make_model(cfg, device), make_batch(cfg, device)
     label_losses(model)
+    if args.networks_only:
+        model._view_synthesis_losses = outputs_mean
+    if args.channels_last:
+        model.to(memory_format=torch.channels_last)
+        for encoder in (model.depth_net.encoder, model.pose_net.encoder):
+            encoder.forward = channels_last_input(encoder.forward)
+    if args.compile_networks:
+        model.depth_net, model.pose_net.encoder = torch.compile(model.depth_net), torch.compile(model.pose_net.encoder)
     optim = adam(model.parameters(), 1e-4, device)  # the trainer's optimiser
 
     def step(i: int) -> None:
@@ -139,13 +169,19 @@ def main() -> None:
     p.add_argument("--warmup", type=int, default=1)
     p.add_argument("--bf16", action="store_true", help="autocast the networks to bfloat16 (losses stay fp32)")
     p.add_argument("--variants", nargs="+", default=["baseline"], choices=list(VARIANTS))
+    p.add_argument("--networks-only", action="store_true", help="the losses replaced by the outputs' mean (see above)")
+    p.add_argument("--channels-last", action="store_true", help="the networks in the channels-last layout")
+    p.add_argument("--compile-networks", action="store_true", help="torch.compile of the networks")
     args = p.parse_args()
     m, batch = (cfg := setting([], args)).model, cfg.train.batch_size
     precision = "bf16 autocast" if args.bf16 else "fp32"
+    only = "networks and Adam only, " if args.networks_only else ""
+    only += "channels last, " if args.channels_last else ""
+    only += "compiled networks, " if args.compile_networks else ""
     print(
         f"{args.preset or 'paper setting'}: ResNet-{m.num_layers}, {m.height}×{m.width}, batch {batch}, "
         f"{precision}, {args.device}, torch {torch.__version__}, {torch.get_num_threads()} threads, "
-        f"{args.steps} profiled steps after {args.warmup}"
+        f"{only}{args.steps} profiled steps after {args.warmup}"
     )
     for name in args.variants:
         parts, total, plain = profile_steps(VARIANTS[name], args)
