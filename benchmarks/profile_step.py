@@ -175,13 +175,13 @@ def main() -> None:
     args = p.parse_args()
     m, batch = (cfg := setting([], args)).model, cfg.train.batch_size
     precision = "bf16 autocast" if args.bf16 else "fp32"
-    only = "networks and Adam only, " if args.networks_only else ""
-    only += "channels last, " if args.channels_last else ""
-    only += "compiled networks, " if args.compile_networks else ""
+    what = "networks and Adam only, " if args.networks_only else ""
+    what += "channels last, " if args.channels_last else ""
+    what += "compiled networks, " if args.compile_networks else ""
     print(
         f"{args.preset or 'paper setting'}: ResNet-{m.num_layers}, {m.height}×{m.width}, batch {batch}, "
         f"{precision}, {args.device}, torch {torch.__version__}, {torch.get_num_threads()} threads, "
-        f"{only}{args.steps} profiled steps after {args.warmup}"
+        f"{what}{args.steps} profiled steps after {args.warmup}"
     )
     for name in args.variants:
         parts, total, plain = profile_steps(VARIANTS[name], args)
