@@ -369,16 +369,17 @@ def test_spec_checks_and_bundled_specs(tmp_path):
         a.loss.skip_weight = 0
         assert a.to_dict() == b.to_dict()
     scdepth = load_spec(EXPERIMENTS / "synth_scdepth.yaml")
-    # synth_scdepth: synth_fast's data and baseline with the step decay; sc05 adds SC-Depth's term only.
+    # synth_scdepth: synth_fast's data and baseline with the step decay; sc05 and sc01 add SC-Depth's term only.
     assert scdepth.data == short.data
     a, b = scdepth.config("lr_decay", 1), short.config("baseline", 1)
     assert a.train.lr_decay_epochs == [6] != b.train.lr_decay_epochs
     a.train.lr_decay_epochs = b.train.lr_decay_epochs
     assert a.to_dict() == b.to_dict()
-    a, b = scdepth.config("sc05", 1), scdepth.config("lr_decay", 1)
-    assert (a.loss.depth_consistency_weight, a.loss.depth_consistency_form) == (0.5, "sc_depth")
-    a.loss.depth_consistency_weight, a.loss.depth_consistency_form = 0.0, "one_way"
-    assert a.to_dict() == b.to_dict()
+    for v, weight in (("sc05", 0.5), ("sc01", 0.1)):
+        a, b = scdepth.config(v, 1), scdepth.config("lr_decay", 1)
+        assert (a.loss.depth_consistency_weight, a.loss.depth_consistency_form) == (weight, "sc_depth")
+        a.loss.depth_consistency_weight, a.loss.depth_consistency_form = 0.0, "one_way"
+        assert a.to_dict() == b.to_dict()
     # synth_open is synth_fast's recipe on the second benchmark: other data, the same runs' configs.
     second = load_spec(EXPERIMENTS / "synth_open.yaml")
     assert second.data["synth"] == {**short.data["synth"], "profile": "open"}
