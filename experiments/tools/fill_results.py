@@ -4,7 +4,7 @@ the secondary rows, the weight EMA against each run's raw weights (per run and p
 baseline's seed-to-seed spread. Run from the repository root after regenerating the report:
 
     posecons study --report-only --spec study/synth_fast --variants baseline id fb cyc all \
-        --seeds 0 1 2 3 4 5 6 7 8 9 --out runs/study_fast --report docs/results/study_fast.md
+        --seeds $(seq 0 15) --out runs/study_fast --report docs/results/study_fast.md
     python experiments/tools/fill_results.py runs/study_fast/results
 """
 
@@ -122,7 +122,7 @@ out = {
         f"{'exact ' if len(d) <= EXACT_SIGN_FLIPS else ''}sign-flip p = {sign_flip_p(d):.2g}"
         f"{'' if len(d) <= EXACT_SIGN_FLIPS else ' (from 2^20 random sign assignments)'}; abs rel {np.mean(a):+.4f}, lower on {sum(x < 0 for x in a)} of {len(a)}, p = {sign_flip_p(a):.2g}. "
         f"Averaged per seed first ({len(seed_means)} seeds, the conservative unit: runs of one seed share their start): {np.mean(seed_means):+.4f}, "
-        f"lower on {sum(x < 0 for x in seed_means)} of {len(seed_means)}, p = {sign_flip_p(seed_means):.3f}"
+        f"lower on {sum(x < 0 for x in seed_means)} of {len(seed_means)}, p = {sign_flip_p(seed_means):.2g}"
     ),
     "BASE": f"{np.mean(base):.4f} ± {np.std(base, ddof=1):.4f} (mean ± SD, n = {len(base)})",
 }
