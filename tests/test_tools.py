@@ -1,5 +1,5 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
-once per checkpoint write; adopt.py, camera_height.py and ema_decays.py as their tests say; a folder
+once per checkpoint write; adopt.py, camera_height.py, ema_decays.py and test_time_scale.py as their tests say; a folder
 that is no study is one line and exit status 2."""
 
 from __future__ import annotations
@@ -188,3 +188,23 @@ def test_ema_decays_refuses_bad_decays_and_an_existing_run_in_one_line(tmp_path)
         done = subprocess.run([*base, "--seed", "0", *extra], capture_output=True, text=True)
         assert done.returncode == 2 and done.stderr.strip() == message
     assert kept.read_bytes() == b"weights"
+
+
+def test_median_held_replaces_each_frames_median_by_its_drives_centred_average(tmp_path):
+    """experiments/tools/test_time_scale.py: frames whose depth is a fixed map times a known factor get
+    each frame's log-median replaced by the mean over the centred window within its drive, so the
+    factors come back as the geometric moving average; the shape of each map is untouched. Caught: the
+    window not centred, running into the next drive, depth and disparity confused, a per-pixel change."""
+    load = importlib.util.spec_from_file_location("test_time_scale", TOOLS / "test_time_scale.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    shape = np.linspace(1.0, 30.0, 16 * 48, dtype=np.float32).reshape(16, 48)
+    scale = np.array([1.0, 4.0, 2.0, 0.5, 8.0])
+    drives = ["a", "a", "a", "b", "b"]
+    held = tool.median_held(np.stack([1 / (shape * s) for s in scale]), drives, 3)
+    geo = lambda *x: float(np.exp(np.mean(np.log(x))))  # noqa: E731
+    want = [geo(1, 4), geo(1, 4, 2), geo(4, 2), geo(0.5, 8), geo(0.5, 8)]
+    for i, w in enumerate(want):
+        np.testing.assert_allclose(1 / held[i], shape * w, rtol=1e-5, err_msg=f"frame {i}")
+    steady = tool.median_held(np.stack([1 / shape] * 4), ["a"] * 4, 3)
+    np.testing.assert_allclose(steady, np.stack([1 / shape] * 4), rtol=1e-6)

@@ -86,7 +86,10 @@ def evaluate_options(spec_name: str, study: Path, out: Path, window: int, varian
                 },
             )
             cv = depths[name]["raw_model"]["frame"]["scale_cv"]
-            print(f"{name} {variant} seed {seed}: raw σ/μ {result['raw_weights']['depth']['frame']['scale_cv']:.4f} → {cv:.4f}", flush=True)
+            print(
+                f"{name} {variant} seed {seed}: raw σ/μ {result['raw_weights']['depth']['frame']['scale_cv']:.4f} → {cv:.4f}",
+                flush=True,
+            )
 
 
 def main() -> None:
