@@ -190,7 +190,7 @@ def test_ema_decays_refuses_bad_decays_and_an_existing_run_in_one_line(tmp_path)
     assert kept.read_bytes() == b"weights"
 
 
-def test_median_held_replaces_each_frames_median_by_its_drives_centred_average(tmp_path):
+def test_median_held_replaces_each_frames_median_by_its_drives_centred_average():
     """experiments/tools/test_time_scale.py: frames whose depth is a fixed map times a known factor get
     each frame's log-median replaced by the mean over the centred window within its drive, so the
     factors come back as the geometric moving average; the shape of each map is untouched. Caught: the
