@@ -61,10 +61,11 @@ def main() -> None:
         p.exit(2, f"error: --lines: must be at least 1, got {args.lines}\n")
     try:
         for checkpoint in args.checkpoints:
+            rows = warped_share_by_depth(checkpoint, args.data, args.lines, args.entry)  # before any output
             print(
                 f"{checkpoint} ({args.entry})\n| true depth | share of pixels | kept by the auto-mask |\n|---|---|---|"
             )
-            for name, share, kept in warped_share_by_depth(checkpoint, args.data, args.lines, args.entry):
+            for name, share, kept in rows:
                 print(f"| {name} | {share:.3f} | {kept:.3f} |")
     except PoseconsError as exc:
         print(f"error: {exc}", file=sys.stderr)
