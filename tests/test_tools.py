@@ -1,6 +1,6 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
-once per checkpoint write; adopt.py, camera_height.py, ema_decays.py and test_time_scale.py as their tests say; a folder
-that is no study is one line and exit status 2."""
+once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, ema_decays.py and
+test_time_scale.py as their tests say; a folder that is no study is one line and exit status 2."""
 
 from __future__ import annotations
 
@@ -53,6 +53,16 @@ def test_a_folder_without_runs_is_one_line_and_exit_2(tmp_path):
     ):
         done = subprocess.run([sys.executable, str(TOOLS / argv[0]), *argv[1:]], capture_output=True, text=True)
         assert done.returncode == 2 and done.stderr.strip() == f"error: {tmp_path}: not a study folder (no runs/ in it)"
+
+
+def test_automask_depth_names_a_missing_checkpoint_in_one_line_before_any_output(tmp_path):
+    """A bad checkpoint is one error line and exit 2, and no table header is printed before it."""
+    missing = tmp_path / "last.pt"
+    tool = [sys.executable, str(TOOLS / "automask_depth.py")]
+    done = subprocess.run([*tool, str(missing), str(tmp_path)], capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", f"error: checkpoint {missing} does not exist\n")
+    done = subprocess.run([*tool, str(missing), str(tmp_path), "--lines", "0"], capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", "error: --lines: must be at least 1, got 0\n")
 
 
 def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_path):
