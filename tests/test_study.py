@@ -22,7 +22,7 @@ from posecons.errors import PoseconsError
 from posecons.study import report, runner
 from posecons.study.spec import load_spec
 from posecons.training.initial_weights import save_initial_weights
-from posecons.training.precision import cpu_kind
+from posecons.training.precision import cpu_kind, processor_name
 from posecons.training.trainer import Trainer
 
 SYNTH = {"drives": 3, "frames": 16, "width": 128, "height": 64, "neighbours": 3, "seed": 0}
@@ -237,6 +237,7 @@ def test_a_spec_pins_the_compute_threads_of_its_runs_and_records_them(tmp_path, 
         torch.set_num_threads(before)
     result = json.loads((out / "results" / "baseline_seed0.json").read_text())
     assert seen == [1] and result["environment"]["threads"] == 1 and result["environment"]["cpu"] == cpu_kind()
+    assert result["environment"]["processor"] == processor_name() != "unknown"
     assert "compute threads per run: 1, pinned by the spec" in (out / "results.md").read_text()
     with pytest.raises(PoseconsError, match="threads must be an integer ≥ 1"):
         load_spec(write_spec(tmp_path / "bad.yaml", threads=0))
@@ -288,8 +289,13 @@ def test_runs_are_paired_only_with_a_reference_run_that_computed_alike():
         result("baseline", 10, 0.08, cpu="AVX2"),
         result("fb", 10, 0.07, "Linux x86_64, 2 CPU threads, 2 used", cpu="AVX2"),
     ]
+    # one CPU kind, two processors: seed 11 on the same one, seed 12 not, seed 13's reference unrecorded
+    results += [result(v, 11, cv, cpu="AVX512", processor="AMD EPYC") for v, cv in (("baseline", 0.08), ("fb", 0.07))]
+    results += [result("baseline", 12, 0.08, cpu="AVX512", processor="AMD EPYC")]
+    results += [result("fb", 12, 0.07, cpu="AVX512", processor="Intel Xeon")]
+    results += [result("baseline", 13, 0.08, cpu="AVX512"), result("fb", 13, 0.07, cpu="AVX512", processor="AMD EPYC")]
     primary = next(r for r in report.paired_rows(["baseline", "fb"], results) if r["primary"])
-    assert primary["n"] == 7 and primary["mean"] == pytest.approx(-0.01)  # seeds 0–3, 5, 6 and 9
+    assert primary["n"] == 8 and primary["mean"] == pytest.approx(-0.01)  # seeds 0–3, 5, 6, 9 and 11
     left_out = "; ".join(report.pair_alike(["baseline", "fb"], results)[1])
     assert "fb seed 4 (1 thread(s), CPU AVX2; baseline: 1 thread(s), CPU AVX512)" in left_out
     assert "fb seed 7 (1 thread(s), CPU AVX512; baseline: unrecorded thread(s), CPU unrecorded)" in left_out
@@ -298,6 +304,8 @@ def test_runs_are_paired_only_with_a_reference_run_that_computed_alike():
         in left_out
     )
     assert "fb seed 10 (2 thread(s), CPU AVX2; baseline: 1 thread(s), CPU AVX2)" in left_out
+    assert "fb seed 12 (1 thread(s), CPU AVX512 (Intel Xeon); baseline: 1 thread(s), CPU AVX512 (AMD EPYC))" in left_out
+    assert "fb seed 13 (1 thread(s), CPU AVX512 (AMD EPYC); baseline: 1 thread(s), CPU AVX512)" in left_out
 
 
 def test_variants_of_a_seed_share_initial_weights_and_data_order(make_synth, tmp_path):

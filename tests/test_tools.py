@@ -67,7 +67,7 @@ def test_automask_depth_names_a_missing_checkpoint_in_one_line_before_any_output
 
 def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_path):
     """experiments/tools/adopt.py: a rerun equal to the old result in every number lets the sources in
-    with the rerun's threads and CPU kind, the spec's config and an adopted record; a rerun one digit off
+    with the rerun's threads, CPU kind and processor, the spec's config and an adopted record; a rerun one digit off
     adopts nothing (caught: numbers compared loosely, or the texts compared, which differ by path)."""
     import json
 
@@ -77,7 +77,7 @@ def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_p
     depth = {"frame": {"scale_cv": 0.07, "abs_rel": 0.23, "predictions": "old/last.pt"}}
     old, rerun, source = tmp_path / "old.json", tmp_path / "rerun.json", tmp_path / "cyc_seed3.json"
     old.write_text(json.dumps({"depth": depth, "pose": {"06": {"ate_full_rmse": 2.5}}}))
-    environment = {"threads": 1, "cpu": "AVX512, bf16 native", "commit": "abc"}
+    environment = {"threads": 1, "cpu": "AVX512, bf16 native", "processor": "AMD EPYC", "commit": "abc"}
     new_depth = {"frame": {**depth["frame"], "predictions": "new/last.pt", "depth_range": None}}
     rerun.write_text(
         json.dumps({"depth": new_depth, "pose": {"06": {"ate_full_rmse": 2.5}}, "environment": environment})
@@ -86,7 +86,7 @@ def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_p
     out = tmp_path / "study"
     assert adopt.adopt("study/synth_fast", out, [(rerun, old)], [source]) == [out / "results" / "cyc_seed3.json"]
     taken = json.loads((out / "results" / "cyc_seed3.json").read_text())
-    assert taken["environment"] == {"machine": "m", "threads": 1, "cpu": "AVX512, bf16 native"}
+    assert taken["environment"] == {"machine": "m", "threads": 1, "cpu": "AVX512, bf16 native", "processor": "AMD EPYC"}
     assert taken["config"]["loss"]["constraints"] == ["cyc"] and taken["overrides"][-1] == "train.seed=3"
     assert taken["adopted"] == {"from": str(source), "reproduced": [f"{rerun} = {old}"]}
     off = json.loads(rerun.read_text())

@@ -364,7 +364,15 @@ def test_auto_precision_is_bf16_only_where_the_cpu_has_it_natively(monkeypatch):
             "" if has == "has" else "emulated: this CPU lacks AVX-512 BF16 / AMX, so bf16 is much slower than 32 here"
         )
         assert resolve_precision("bf16", cpu) == ("bf16", warning)
-        assert cpu_kind().endswith(f", bf16 {'native' if has == 'has' else 'emulated'}")
+        assert cpu_kind().endswith(f", bf16 {'native' if has == 'has' else 'emulated'}" + ", AMX" * amx)
+        # oneDNN capped below AMX computes without it, and the record names the cap
+        monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX512_CORE_BF16")
+        assert cpu_kind().endswith(
+            f", bf16 {'native' if has == 'has' else 'emulated'}, ONEDNN_MAX_CPU_ISA=AVX512_CORE_BF16"
+        )
+        monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX512_CORE_AMX")
+        assert ", AMX, ONEDNN_MAX_CPU_ISA=AVX512_CORE_AMX" in cpu_kind() if amx else ", AMX" not in cpu_kind()
+        monkeypatch.delenv("ONEDNN_MAX_CPU_ISA")
     monkeypatch.delattr(torch.cpu, "_is_avx512_bf16_supported")  # a torch without the probes: fp32, the safe side
     monkeypatch.delattr(torch.cpu, "_is_amx_tile_supported")
     assert resolve_precision("auto", cpu)[0] == "32"

@@ -2,11 +2,11 @@
 reproduced earlier runs exactly — so that runs trained before a result recorded its CPU kind (or as the
 first steps of a longer recipe, at_steps.py) pair with the runs trained here.
 
-The report pairs a run only with a reference run that computed alike (same threads and CPU kind;
-docs/results.md §8). A result written before that record reads "unrecorded" and pairs with nothing
+The report pairs a run only with a reference run that computed alike (same threads, CPU kind and
+processor; docs/results.md §8). A result written before that record reads "unrecorded" and pairs with nothing
 recorded. If ``--check RERUN=OLD`` holds — every number of the rerun's depth and pose results equal
 to the old result's, to the last digit — the old runs computed as this machine does, and each SOURCE
-is written to OUT/results with the rerun's threads and CPU kind, the spec's config and overrides of
+is written to OUT/results with the rerun's threads, CPU kind and processor, the spec's config and overrides of
 its variant and seed, and an ``adopted`` record naming the source file and the checks.
 
     python experiments/tools/adopt.py study/synth_fast runs/study_fast \\
@@ -55,10 +55,11 @@ def check(rerun: Path, old: Path) -> dict:
 def adopt(spec_name: str, out: Path, checks: list[tuple[Path, Path]], sources: list[Path]) -> list[Path]:
     spec = load_spec(spec_name)
     environments = [check(rerun, old) for rerun, old in checks]
-    kinds = {(e["threads"], e["cpu"]) for e in environments}
+    # what pairs a run (report.run_kind); the processor only where the reruns recorded it
+    kinds = {tuple((k, e[k]) for k in ("threads", "cpu", "processor") if k in e) for e in environments}
     if len(kinds) != 1:
         raise PoseconsError(f"the reruns computed differently from each other: {sorted(kinds)}")
-    threads, cpu = kinds.pop()
+    kind = dict(kinds.pop())
     written = []
     for source in sources:
         result = json.loads(source.read_text())
@@ -69,7 +70,7 @@ def adopt(spec_name: str, out: Path, checks: list[tuple[Path, Path]], sources: l
         result.update(
             overrides=spec.run_overrides(variant, seed),
             config=spec.config(variant, seed).to_dict(),
-            environment={**result.get("environment", {}), "threads": threads, "cpu": cpu},
+            environment={**result.get("environment", {}), **kind},
             adopted={"from": str(source), "reproduced": [f"{rerun} = {old}" for rerun, old in checks]},
         )
         write_json(target, result)

@@ -200,15 +200,17 @@ def paired_metrics(results: Sequence[dict]) -> list[tuple[str, Getter, str]]:
 
 def run_kind(result: dict) -> str:
     """How a run computed, beside its seed: its compute threads and its processor. A run's
-    trajectory depends on both as much as on its seed (another thread count, or AVX2 kernels in place
-    of AVX-512 ones, rounds differently from the first step on), so a run is paired only with a
-    reference run of its own kind. Results written before a field was recorded say so."""
+    trajectory depends on both as much as on its seed (another thread count, AVX2 kernels in place
+    of AVX-512 ones, AMX or another processor model of the same kind rounds differently from the first
+    step on), so a run is paired only with a reference run of its own kind. Results written before a
+    field was recorded say so, and pair only with each other."""
     env = result.get("environment", {})
     machine = env.get("machine", "")
     used = re.search(r"(\d+) used(, (.+))?$", machine)
     threads = env.get("threads", used.group(1) if used else "unrecorded")
     gpu = f", {used.group(3)}" if used and used.group(3) else ""
-    return f"{threads} thread(s), CPU {env.get('cpu', 'unrecorded')}{gpu}"
+    processor = f" ({env['processor']})" if "processor" in env else ""
+    return f"{threads} thread(s), CPU {env.get('cpu', 'unrecorded')}{processor}{gpu}"
 
 
 def pair_alike(variants: Sequence[str], results: Sequence[dict]) -> tuple[list[dict], list[str]]:
@@ -374,7 +376,8 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
     envs = [r["environment"] for r in results if "environment" in r]
     code = "; ".join(
         dict.fromkeys(
-            f"commit `{e['commit']}` on {e['machine']}{', CPU ' + e['cpu'] if 'cpu' in e else ''} (torch {e['torch']})"
+            f"commit `{e['commit']}` on {e['machine']}{', CPU ' + e['cpu'] if 'cpu' in e else ''}"
+            f"{' (' + e['processor'] + ')' if 'processor' in e else ''} (torch {e['torch']})"
             for e in envs
         )
     )

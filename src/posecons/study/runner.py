@@ -58,7 +58,7 @@ from ..evaluation import evaluate
 from ..fileio import check_writable, make_dirs, write_json, write_text
 from ..inference.backend import Predictor, load_predictor
 from ..training.initial_weights import save_initial_weights
-from ..training.precision import cpu_kind
+from ..training.precision import cpu_kind, processor_name
 from ..training.run_dir import run_in_progress
 from ..training.trainer import train
 from .report import FAILED, STUDY_FILE, read_json, write_report
@@ -248,6 +248,7 @@ def environment(accelerator: str) -> dict[str, str]:
         "machine": machine,
         "threads": threads,
         "cpu": cpu_kind(),
+        "processor": processor_name(),
         "python": platform.python_version(),
         "torch": torch.__version__,
     }

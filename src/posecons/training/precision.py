@@ -6,6 +6,8 @@ trainer as the one place that knows which device supports which number format an
 from __future__ import annotations
 
 import os
+import platform
+from pathlib import Path
 
 import torch
 
@@ -26,10 +28,30 @@ def native_bf16(device: torch.device) -> tuple[bool, str]:
 
 
 def cpu_kind() -> str:
-    """The CPU's vector capability as torch dispatches on it (e.g. AVX2, AVX512) and whether its bf16 is
-    native: a run's kernels, and so its rounding, follow from both."""
+    """The CPU's vector capability as torch dispatches on it (e.g. AVX2, AVX512), whether its bf16 is
+    native, and whether oneDNN may use AMX tiles (and the ISA cap ``ONEDNN_MAX_CPU_ISA`` where one is
+    set): a run's kernels, and so its rounding, follow from all of them. The same run with and without
+    AMX ended 0.06 apart in abs rel (docs/results.md §8)."""
     native, _ = native_bf16(torch.device("cpu"))
-    return f"{torch.backends.cpu.get_cpu_capability()}, bf16 {'native' if native else 'emulated'}"
+    kind = f"{torch.backends.cpu.get_cpu_capability()}, bf16 {'native' if native else 'emulated'}"
+    amx = getattr(getattr(torch, "cpu", None), "_is_amx_tile_supported", None)
+    cap = os.environ.get("ONEDNN_MAX_CPU_ISA", "")
+    if amx is not None and amx() and (not cap or "AMX" in cap.upper() or cap.upper() in ("ALL", "DEFAULT")):
+        kind += ", AMX"
+    return kind + (f", ONEDNN_MAX_CPU_ISA={cap}" if cap else "")
+
+
+def processor_name() -> str:
+    """The processor's model name ("model name" of /proc/cpuinfo on Linux): beyond :func:`cpu_kind`, two
+    processors of one kind still round differently (an AMD and an Intel CPU, both AVX-512 with native
+    bf16 and AMX off, ended the same run 0.012 apart in abs rel, docs/results.md §8)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
 
 
 def resolve_precision(precision: str, device: torch.device) -> tuple[str, str]:
