@@ -1,5 +1,5 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
-once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, ema_decays.py and
+once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, early_steps.py, ema_decays.py and
 test_time_scale.py as their tests say; a folder that is no study is one line and exit status 2."""
 
 from __future__ import annotations
@@ -218,3 +218,33 @@ def test_median_held_replaces_each_frames_median_by_its_drives_centred_average()
         np.testing.assert_allclose(1 / held[i], shape * w, rtol=1e-5, err_msg=f"frame {i}")
     steady = tool.median_held(np.stack([1 / shape] * 4), ["a"] * 4, 3)
     np.testing.assert_allclose(steady, np.stack([1 / shape] * 4), rtol=1e-6)
+
+
+def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make_synth, tmp_path):
+    """experiments/tools/early_steps.py: its photometric loss at every step equals the one `posecons
+    train` logs at that step, through an epoch boundary and the lr decay after it. Caught: one epoch
+    only (the tool stopped at its end), the next epoch's data order not drawn, the decay not applied."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from posecons.config import load_config
+    from posecons.training.trainer import Trainer, train
+    from tiny import TINY_MODEL
+
+    load = importlib.util.spec_from_file_location("early_steps", TOOLS / "early_steps.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    data = make_synth(2, 16, 192, 64, 3)
+    base = [*TINY_MODEL, "train.val_every=off", "train.log_every=1", "train.image_every=0", "train.lr=1e-3"]
+    per_epoch = Trainer(load_config(overrides=base), data, tmp_path / "count", quiet=True).steps_per_epoch
+    steps = 2 * per_epoch + 2
+    config = load_config(
+        overrides=[*base, f"train.max_steps={steps}", "train.lr_decay_epochs=[2]", "train.lr_decay=0.01"]
+    )
+    train(config, data, tmp_path / "run", quiet=True)
+    log = EventAccumulator(str(tmp_path / "run" / "tb"))
+    log.Reload()
+    logged = {e.step: e.value for e in log.Scalars("loss/photometric")}
+    probed = {step: losses["photometric"] for step, losses, _ in tool.first_steps(config, data, steps)}
+    assert sorted(probed) == list(range(1, steps + 1)) == sorted(logged)
+    for step, value in probed.items():
+        assert abs(value - logged[step]) <= 1e-6 * abs(value), step

@@ -3,14 +3,16 @@ each source, the disparity's mean and its far-saturated share, and the share of 
 warped source beats the unwarped one (the auto-mask). A run from scratch settles its direction of
 motion in these steps; for forward driving the translation's z of T_{−n←0} must be positive
 (camera −n is behind), and a run that points it backwards or pins the disparity at the far end
-collapses (experiments/investigation.md §3).
+collapses (experiments/investigation.md §3, §11). The steps run over as many epochs as they need, as
+in training; the first step and every ``--every``-th are printed.
 
-    python experiments/tools/early_steps.py --config synth/study --data-path DATA --steps 60 --set train.seed=1
+    python experiments/tools/early_steps.py --config synth/study --data-path DATA --steps 200 --every 10 --set train.seed=1
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import tempfile
 from pathlib import Path
 
@@ -24,28 +26,42 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--config", required=True, help="preset name or YAML file")
     p.add_argument("--data-path", required=True)
-    p.add_argument("--steps", type=int, default=60, help="at most one epoch")
+    p.add_argument("--steps", type=int, default=60, help="training steps, over as many epochs as they need")
+    p.add_argument("--every", type=int, default=1, help="print every N-th step (and the first)")
     add_overrides(p, "a config override such as train.warmup_steps=0")
     args = p.parse_args()
     config = load_config(resolve_preset(args.config), args.overrides)
     sources = config.model.frame_ids[1:]
     print("| step | photometric | " + " | ".join(f"t of T_{{{f}←0}} (x, y, z)" for f in sources), end="")
     print(" | disparity mean | far share | warped share |\n|" + "---|" * (len(sources) + 5))
+    for step, losses, outputs in first_steps(config, args.data_path, args.steps):
+        if step == 1 or step % args.every == 0:
+            print_row(step, losses, outputs, sources)
+
+
+def first_steps(config, data_path: str, steps: int):
+    """(step, losses, outputs) of the first ``steps`` training steps, as ``posecons train`` takes them."""
     with tempfile.TemporaryDirectory() as out:
-        trainer = Trainer(config, args.data_path, Path(out) / "run", quiet=True)
-        for batch in trainer._loader(0, 0):
-            losses, outputs = trainer._micro_step(batch, last=True)
-            trainer.step += 1
-            t = [outputs["poses"][f][:, :3, 3].mean(0).tolist() for f in sources]
-            signs = collapse_signs(outputs)
-            print(
-                f"| {trainer.step} | {losses['photometric']:.4f} | "
-                + " | ".join(", ".join(f"{v:+.2e}" for v in xyz) for xyz in t)
-                + f" | {outputs['disp'][0].mean():.3f} | {signs['far_fraction']:.2f} | {signs['warped_fraction']:.2f} |",
-                flush=True,
-            )
-            if trainer.step >= args.steps:
-                break
+        trainer = Trainer(config, data_path, Path(out) / "run", quiet=True)
+        for epoch in itertools.count():
+            for batch in trainer._loader(epoch, 0):
+                losses, outputs = trainer._micro_step(batch, last=True)
+                trainer.step += 1
+                yield trainer.step, losses, outputs
+                if trainer.step >= steps:
+                    return
+            trainer.scheduler.step()  # the epoch's lr decay, where the recipe has one, as in training
+
+
+def print_row(step: int, losses: dict, outputs: dict, sources: list[int]) -> None:
+    t = [outputs["poses"][f][:, :3, 3].mean(0).tolist() for f in sources]
+    signs = collapse_signs(outputs)
+    print(
+        f"| {step} | {losses['photometric']:.4f} | "
+        + " | ".join(", ".join(f"{v:+.2e}" for v in xyz) for xyz in t)
+        + f" | {outputs['disp'][0].mean():.3f} | {signs['far_fraction']:.2f} | {signs['warped_fraction']:.2f} |",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":
