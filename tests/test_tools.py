@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from posecons.checkpoint import load_checkpoint
@@ -248,3 +249,29 @@ def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make
     assert sorted(probed) == list(range(1, steps + 1)) == sorted(logged)
     for step, value in probed.items():
         assert abs(value - logged[step]) <= 1e-6 * abs(value), step
+
+
+def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_it(tmp_path):
+    """experiments/tools/depth_floor.py on a hand-made frame: LiDAR at 4, 8 and 16 m on thirds of the
+    image, the prediction the truth ÷ 1000 but clipped at a floor of 0.006 (6 m at that scale): the
+    4 m third sits at the floor and is the LiDAR's share below it. Caught: the floor's 1.2× ignored,
+    the frame's scale inverted, a span of the LiDAR's zeros. A folder that is no study, a missing checkpoint:
+    one line each, exit 2, before any output."""
+    load = importlib.util.spec_from_file_location("depth_floor", TOOLS / "depth_floor.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    gt = np.zeros((6, 30), np.float32)
+    gt[::2, :10], gt[::2, 10:20], gt[::2, 20:] = 4.0, 8.0, 16.0  # every other row has LiDAR
+    depth = np.maximum(np.repeat(gt[:1], 6, 0) / 1000, 0.006)[None]
+    stats = tool.floor_stats(depth, [gt], 0.006)
+    assert stats["near_floor"] == pytest.approx(1 / 3) and stats["lidar_below_floor"] == pytest.approx(1 / 3)
+    assert stats["lidar_span"] == pytest.approx(4.0) and stats["pred_span"] == pytest.approx(16 / 6)
+    tool_cmd = [sys.executable, str(TOOLS / "depth_floor.py"), str(tmp_path), str(tmp_path / "last.pt")]
+    done = subprocess.run(tool_cmd, capture_output=True, text=True)
+    not_study = f"error: {tmp_path}: not a study folder with synthetic data (no gt/test_depth.npz)\n"
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", not_study)
+    (tmp_path / "gt").mkdir()
+    (tmp_path / "gt" / "test_depth.npz").write_bytes(b"")
+    done = subprocess.run(tool_cmd, capture_output=True, text=True)
+    missing = f"error: checkpoint {tmp_path / 'last.pt'} does not exist\n"
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", missing)
