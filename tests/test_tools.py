@@ -224,7 +224,8 @@ def test_median_held_replaces_each_frames_median_by_its_drives_centred_average()
 def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make_synth, tmp_path):
     """experiments/tools/early_steps.py: its photometric loss at every step equals the one `posecons
     train` logs at that step, through an epoch boundary and the lr decay after it. Caught: one epoch
-    only (the tool stopped at its end), the next epoch's data order not drawn, the decay not applied."""
+    only (the tool stopped at its end), the next epoch's data order not drawn, the decay not applied;
+    --every 0 is one line and exit 2."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     from posecons.config import load_config
@@ -249,6 +250,9 @@ def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make
     assert sorted(probed) == list(range(1, steps + 1)) == sorted(logged)
     for step, value in probed.items():
         assert abs(value - logged[step]) <= 1e-6 * abs(value), step
+    tool_cmd = [sys.executable, str(TOOLS / "early_steps.py"), "--config", "synth/study", "--data-path", str(data)]
+    done = subprocess.run([*tool_cmd, "--every", "0"], capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", "error: --every: must be at least 1, got 0\n")
 
 
 def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_it(tmp_path):

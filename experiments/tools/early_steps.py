@@ -30,6 +30,9 @@ def main() -> None:
     p.add_argument("--every", type=int, default=1, help="print every N-th step (and the first)")
     add_overrides(p, "a config override such as train.warmup_steps=0")
     args = p.parse_args()
+    for name in ("steps", "every"):
+        if getattr(args, name) < 1:
+            p.exit(2, f"error: --{name}: must be at least 1, got {getattr(args, name)}\n")
     config = load_config(resolve_preset(args.config), args.overrides)
     sources = config.model.frame_ids[1:]
     print("| step | photometric | " + " | ".join(f"t of T_{{{f}←0}} (x, y, z)" for f in sources), end="")
