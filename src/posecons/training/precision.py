@@ -21,10 +21,14 @@ def native_bf16(device: torch.device) -> tuple[bool, str]:
     if device.type == "cuda":
         native = torch.cuda.is_bf16_supported()
         return native, f"{torch.cuda.get_device_name(device)} {'has' if native else 'lacks'} bf16"
-    cpu = getattr(torch, "cpu", None)
-    checks = [getattr(cpu, name, None) for name in ("_is_avx512_bf16_supported", "_is_amx_tile_supported")]
-    native = any(check() for check in checks if check is not None)
+    native = _cpu_has("_is_avx512_bf16_supported") or _cpu_has("_is_amx_tile_supported")
     return native, f"this CPU {'has' if native else 'lacks'} AVX-512 BF16 / AMX"
+
+
+def _cpu_has(probe: str) -> bool:
+    """torch.cpu's ``probe`` (e.g. ``_is_amx_tile_supported``); False in a torch without it."""
+    check = getattr(getattr(torch, "cpu", None), probe, None)
+    return check is not None and bool(check())
 
 
 def cpu_kind() -> str:
@@ -34,9 +38,8 @@ def cpu_kind() -> str:
     AMX ended 0.06 apart in abs rel (docs/results.md §8)."""
     native, _ = native_bf16(torch.device("cpu"))
     kind = f"{torch.backends.cpu.get_cpu_capability()}, bf16 {'native' if native else 'emulated'}"
-    amx = getattr(getattr(torch, "cpu", None), "_is_amx_tile_supported", None)
     cap = os.environ.get("ONEDNN_MAX_CPU_ISA", "")
-    if amx is not None and amx() and (not cap or "AMX" in cap.upper() or cap.upper() in ("ALL", "DEFAULT")):
+    if _cpu_has("_is_amx_tile_supported") and (not cap or "AMX" in cap.upper() or cap.upper() in ("ALL", "DEFAULT")):
         kind += ", AMX"
     return kind + (f", ONEDNN_MAX_CPU_ISA={cap}" if cap else "")
 
