@@ -477,3 +477,22 @@ def test_photometric_error_runs_eagerly_where_torch_compile_cannot_compile(monke
     assert compiled.photometric_error.fn is compiled.photometric_error.eager
     assert "torch.compile failed" in caplog.text and "no-such-compiler" in caplog.text
     assert all(torch.equal(got[k], want[k]) for k in want)
+
+
+@pytest.mark.parametrize("init_depth", [0.5, 3.0])
+def test_init_depth_starts_the_depth_there_and_changes_no_other_weight(init_depth):
+    torch.manual_seed(0)
+    plain = PoseConsModel(make_config(**{"model.min_depth": 0.1, "model.max_depth": 10.0}))
+    torch.manual_seed(0)
+    placed = PoseConsModel(
+        make_config(**{"model.min_depth": 0.1, "model.max_depth": 10.0, "model.init_depth": init_depth})
+    )
+    a, b = plain.state_dict(), placed.state_dict()
+    moved = [k for k in a if not torch.equal(a[k], b[k])]
+    assert moved and all(k.startswith("depth_net.decoder.disp_convs.") and k.endswith(".bias") for k in moved)
+    images = torch.rand(2, 3, H, W)
+    with torch.no_grad():
+        start = placed.eval().predict_depth(images)[1].median().item()
+        default = plain.eval().predict_depth(images)[1].median().item()
+    assert start == pytest.approx(init_depth, rel=0.25)  # the weights' noise spreads it a little
+    assert default == pytest.approx(0.2, rel=0.25)  # sigmoid 0.5: about twice min_depth

@@ -60,6 +60,7 @@ RULES: dict[str, Check] = {
     "model.pretrained": _one_of(True, False, "auto"),
     "model.min_depth": _POSITIVE,
     "model.max_depth": _POSITIVE,
+    "model.init_depth": _at_least(0),
     "model.scales": _rule(
         lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
         "must be distinct scales from 0–3, e.g. [0, 1, 2, 3]",
@@ -126,6 +127,9 @@ class ModelConfig:
     width: int = 640
     min_depth: float = 0.1  # metres (up to the unknown scale of monocular training)
     max_depth: float = 100.0
+    # Depth the disparity heads start at (their bias; the same at every pixel up to the weights' noise).
+    # 0: PyTorch's bias init, sigmoid ≈ 0.5, i.e. about 2 × min_depth: at the near end of the range
+    init_depth: float = 0.0
     scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])  # decoder outputs at 1/2^s size; any of 0-3
     frame_ids: list[int] = field(default_factory=lambda: [0, -1, 1])  # target first, then sources
     # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
@@ -233,6 +237,11 @@ class Config:
         m, lo = self.model, self.loss
         if m.min_depth >= m.max_depth:
             raise PoseconsError(f"model.min_depth ({m.min_depth}) must be below model.max_depth ({m.max_depth})")
+        if m.init_depth and not m.min_depth < m.init_depth < m.max_depth:
+            raise PoseconsError(
+                f"model.init_depth ({m.init_depth}) must lie between model.min_depth ({m.min_depth}) "
+                f"and model.max_depth ({m.max_depth}), or be 0 (off)"
+            )
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(
                 f"model.height/width must be positive multiples of 32 (the encoder downsamples 32×); "

@@ -20,7 +20,15 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .config import Config
-from .geometry import check_tensor, disp_to_depth, invert_pose, pose_vec_to_mat, scale_intrinsics, warp
+from .geometry import (
+    check_tensor,
+    depth_to_sigmoid,
+    disp_to_depth,
+    invert_pose,
+    pose_vec_to_mat,
+    scale_intrinsics,
+    warp,
+)
 from .losses import (
     cycle_loss,
     depth_consistency_loss,
@@ -86,7 +94,8 @@ class PoseConsModel(nn.Module):
         self.config = config
         m = config.model
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
-        self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
+        start = depth_to_sigmoid(m.init_depth, m.min_depth, m.max_depth) if m.init_depth else None
+        self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales), start)
         self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror)
         self.photometric_error = (
             _CompiledOrEager(photometric_error) if config.train.compile_losses else photometric_error

@@ -4,6 +4,7 @@ with four sigmoid disparity scales, and a small pose decoder.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -250,9 +251,15 @@ class Conv3x3(nn.Sequential):
 
 
 class DepthDecoder(nn.Module):
-    """U-Net decoder: returns sigmoid disparities ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale."""
+    """U-Net decoder: returns sigmoid disparities ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale.
 
-    def __init__(self, num_ch_enc: list[int], scales: tuple[int, ...] = (0, 1, 2, 3)):
+    ``init_sigmoid``: the output every head starts near (its bias = logit of it); None keeps PyTorch's
+    random bias, so sigmoid ≈ 0.5.
+    """
+
+    def __init__(
+        self, num_ch_enc: list[int], scales: tuple[int, ...] = (0, 1, 2, 3), init_sigmoid: float | None = None
+    ):
         super().__init__()
         self.scales = tuple(scales)
         ch = [16, 32, 64, 128, 256]
@@ -263,6 +270,9 @@ class DepthDecoder(nn.Module):
             self.up_in.append(Conv3x3(cin, ch[i]))
             self.up_out.append(Conv3x3(ch[i] + (num_ch_enc[i - 1] if i > 0 else 0), ch[i]))
         self.disp_convs = nn.ModuleDict({str(s): Conv3x3(ch[s], 1, elu=False) for s in self.scales})
+        if init_sigmoid is not None:  # draws no random numbers: every other weight starts as without it
+            for head in self.disp_convs.values():
+                nn.init.constant_(head[1].bias, math.log(init_sigmoid / (1 - init_sigmoid)))
 
     def forward(self, feats: list[torch.Tensor]) -> dict[int, torch.Tensor]:
         out = {}
@@ -300,10 +310,12 @@ class PoseDecoder(nn.Module):
 class DepthNet(nn.Module):
     """One RGB frame (B, 3, H, W) → sigmoid disparities per scale."""
 
-    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, scales=(0, 1, 2, 3)):
+    def __init__(
+        self, num_layers: int = 18, imagenet: dict | None = None, scales=(0, 1, 2, 3), init_sigmoid: float | None = None
+    ):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet)
-        self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales)
+        self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales, init_sigmoid)
 
     def forward(self, images: torch.Tensor) -> dict[int, torch.Tensor]:
         return self.decoder(self.encoder(images))
