@@ -51,6 +51,7 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
         ("model.init_depth=0.05", r"^model.init_depth \(0.05\) must lie between model.min_depth \(0.1\) and"),
         ("model.init_depth=-1", "model.init_depth must be ≥ 0"),
+        ("loss.depth_anchor_weight=1", "^loss.depth_anchor_weight > 0 needs model.init_depth"),
         ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.ema_decay=-0.1", r"^train.ema_decay must be in \[0, 1\), got -0.1$"),

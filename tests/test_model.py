@@ -1,5 +1,6 @@
 import copy
 import itertools
+import math
 
 import pytest
 import torch
@@ -496,3 +497,19 @@ def test_init_depth_starts_the_depth_there_and_changes_no_other_weight(init_dept
         default = plain.eval().predict_depth(images)[1].median().item()
     assert start == pytest.approx(init_depth, rel=0.25)  # the weights' noise spreads it a little
     assert default == pytest.approx(0.2, rel=0.25)  # sigmoid 0.5: about twice min_depth
+
+
+def test_depth_anchor_adds_its_weighted_term_to_the_total():
+    torch.manual_seed(0)
+    batch = random_batch()
+    extra = {"model.min_depth": 0.1, "model.max_depth": 10.0, "model.init_depth": 0.5}
+    totals = {}
+    for w in (0, 2):
+        torch.manual_seed(1)
+        model = PoseConsModel(make_config(**extra, **{"loss.depth_anchor_weight": w}))
+        _, losses = model(batch)
+        totals[w] = losses["total"].item()
+    depth = model.predict_depth(batch["frames"][:, 0])[1]  # train mode, as in the step
+    expected = (depth.log().mean() - math.log(0.5)) ** 2
+    assert losses["anchor"].item() == pytest.approx(expected.item(), rel=1e-5)
+    assert totals[2] - totals[0] == pytest.approx(2 * losses["anchor"].item(), rel=1e-4)

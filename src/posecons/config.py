@@ -79,6 +79,7 @@ RULES: dict[str, Check] = {
     "loss.depth_consistency_weight": _at_least(0),
     "loss.depth_consistency_form": _one_of("one_way", "sc_depth"),
     "loss.skip_weight": _at_least(0),
+    "loss.depth_anchor_weight": _at_least(0),
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
     "data.img_ext": _rule(bool, "must be an extension such as .png"),
@@ -135,6 +136,9 @@ class ModelConfig:
     # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
     # mirror-equivariant by construction (sideways motion, yaw and roll cannot hold a constant bias)
     pose_mirror: bool = False
+    # The pose decoder's last layer starts at zero, so every motion starts at exactly the identity and
+    # its first direction follows the photometric gradient instead of the random initial sign
+    pose_zero_init: bool = False
 
 
 @dataclass
@@ -161,6 +165,11 @@ class LossConfig:
     # taught by the cycle constraint alone (experiments/investigation.md §5); > 0 runs the depth net on
     # the sources too and the pose net on (−n, +n) every step
     skip_weight: float = 0.0
+    # (mean log depth of the batch's targets at scale 0 − log model.init_depth)², which holds the batch's
+    # geometric-mean depth where it started. View synthesis cannot see the scale that depth and
+    # translation share, and without it the depth can drift to an end of its range while the translation
+    # lags (experiments/investigation.md §13). > 0 needs model.init_depth
+    depth_anchor_weight: float = 0.0
 
 
 @dataclass
@@ -237,6 +246,8 @@ class Config:
         m, lo = self.model, self.loss
         if m.min_depth >= m.max_depth:
             raise PoseconsError(f"model.min_depth ({m.min_depth}) must be below model.max_depth ({m.max_depth})")
+        if lo.depth_anchor_weight > 0 and not m.init_depth:
+            raise PoseconsError("loss.depth_anchor_weight > 0 needs model.init_depth, the depth it holds the batch at")
         if m.init_depth and not m.min_depth < m.init_depth < m.max_depth:
             raise PoseconsError(
                 f"model.init_depth ({m.init_depth}) must lie between model.min_depth ({m.min_depth}) "

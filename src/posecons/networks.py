@@ -328,11 +328,16 @@ MIRROR_SIGN = torch.tensor([[1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]])
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False):
+    def __init__(
+        self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False, zero_init: bool = False
+    ):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, grouped=True)
         self.mirror = mirror
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
+        if zero_init:  # every motion starts at exactly the identity; draws no random numbers
+            nn.init.zeros_(self.decoder.net[-1].weight)
+            nn.init.zeros_(self.decoder.net[-1].bias)
 
     def forward(
         self,
