@@ -1,0 +1,90 @@
+"""Does a frame's depth scale follow its pose net's? For each moving test frame i of a synthetic study,
+the depth's scale s = median(LiDAR)/median(prediction) (the study's per-frame scales) beside the pose
+net's r = |t_true| / |t_pred| for the pair (i, i + stride): both are metres per network unit, and the
+photometric loss ties them in training. Printed: the spread of log s and log r, how much of log s's
+variance log r explains, and each one's correlation with the frame's median LiDAR depth (the
+compression of far scenes, experiments/investigation.md §4, §13). Frames whose true motion over the
+pair is under --min-motion metres (stops) have no scale in t and are left out.
+
+    python experiments/tools/pose_scale.py --study OUT baseline/seed0 [anchor/seed4 ...]
+
+OUT is a `posecons study --out` folder of synthetic data (`posecons synth` writes each drive's
+odometry sequence under the drive's number).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from posecons.data.gt import load_gt
+from posecons.data.kitti_odometry import list_sequence_frames
+from posecons.data.splits import read_split
+from posecons.data.trajectory_io import read_kitti_poses
+from posecons.inference.backend import load_predictor, predict_batches
+from posecons.inference.media import frames_from_paths
+
+
+def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[str, float]:
+    variant, seed = run.split("/seed")
+    result = json.loads((study / "results" / f"{variant}_seed{seed}.json").read_text())
+    predictor = load_predictor(study / "runs" / run / "checkpoints" / "last.pt", "cpu")
+    split = read_split(study / "data" / "splits" / "synth" / "test_files.txt")
+    scales = np.asarray(result["depth"]["frame"]["scales"])
+    gts, _ = load_gt(study / "gt" / "test_depth.npz")
+    assert len(scales) == len(split) == len(gts), "the study's scales must cover every test frame"
+    odometry = study / "data" / "odometry"
+    log_s, log_r, log_gt = [], [], []
+    for sequence in dict.fromkeys(re.search(r"drive_(\d+)", line.folder).group(1)[-2:] for line in split):
+        frames = frames_from_paths(list_sequence_frames(odometry, sequence))
+        images = torch.from_numpy(
+            np.concatenate([x for _, x, _ in predict_batches(predictor, frames, 32, depth=False)])
+        )
+        poses = read_kitti_poses(odometry / "poses" / f"{sequence}.txt")
+        true = np.linalg.norm((np.linalg.inv(poses[stride:]) @ poses[:-stride])[:, :3, 3], axis=1)
+        with torch.no_grad():
+            t = predictor.model.pose_net(images[:-stride], images[stride:])[1][:, 0].double().numpy()
+        r = true / np.linalg.norm(t, axis=1)  # r[i]: the pair (i, i + stride)
+        for k, line in enumerate(split):
+            if f"drive_00{sequence}" in line.folder and line.frame < len(r) and true[line.frame] >= min_motion:
+                gt = gts[k][gts[k] > 0]
+                log_s.append(np.log(scales[k]))
+                log_r.append(np.log(r[line.frame]))
+                log_gt.append(np.log(np.median(gt)))
+    s, r, g = map(np.asarray, (log_s, log_r, log_gt))
+    corr = np.corrcoef(s, r)[0, 1]
+    return {
+        "frames": len(s),
+        "sd_log_s": s.std(),
+        "sd_log_r": r.std(),
+        "corr_s_r": corr,
+        "explained": corr**2,
+        "corr_s_gt": np.corrcoef(s, g)[0, 1],
+        "corr_r_gt": np.corrcoef(r, g)[0, 1],
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--study", type=Path, required=True, help="a `posecons study --out` folder")
+    p.add_argument("runs", nargs="+", help="VARIANT/seedK")
+    p.add_argument("--stride", type=int, default=3, help="frame offset of the pairs (the training offset)")
+    p.add_argument("--min-motion", type=float, default=0.5, help="metres over a pair below which a frame is a stop")
+    args = p.parse_args()
+    print("| run | moving frames | sd log s | sd log r | corr(log s, log r) | corr with log median LiDAR: s, r |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for run in args.runs:
+        st = pose_scale(args.study, run, args.stride, args.min_motion)
+        print(
+            f"| {run} | {st['frames']} | {st['sd_log_s']:.3f} | {st['sd_log_r']:.3f} | {st['corr_s_r']:+.2f} "
+            f"({100 * st['explained']:.0f} %) | {st['corr_s_gt']:+.2f}, {st['corr_r_gt']:+.2f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
