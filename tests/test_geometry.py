@@ -6,7 +6,6 @@ import torch
 from posecons.geometry import (
     axis_angle_to_matrix,
     backproject,
-    depth_to_sigmoid,
     disp_to_depth,
     flip_intrinsics,
     invert_pose,
@@ -124,13 +123,6 @@ def test_disp_to_depth_range():
     scaled, depth = disp_to_depth(torch.tensor([0.0, 1.0]), 0.1, 100.0)
     assert torch.allclose(depth, torch.tensor([100.0, 0.1]))
     assert torch.allclose(scaled * depth, torch.ones(2))
-
-
-@pytest.mark.parametrize("depth", [0.1, 0.3, 7.0, 100.0])
-def test_depth_to_sigmoid_inverts_disp_to_depth(depth):
-    s = depth_to_sigmoid(depth, 0.1, 100.0)
-    assert 0 <= s <= 1
-    assert disp_to_depth(torch.tensor(s, dtype=torch.float64), 0.1, 100.0)[1].item() == pytest.approx(depth, rel=1e-12)
 
 
 def test_scale_intrinsics_per_level():

@@ -7,7 +7,6 @@ import torch.nn.functional as F
 from posecons.geometry import invert_pose, make_pose, pose_vec_to_mat
 from posecons.losses import (
     cycle_loss,
-    depth_anchor_loss,
     depth_consistency_loss,
     forward_backward_loss,
     identity_loss,
@@ -230,20 +229,3 @@ def test_depth_consistency_gradients_reach_both_depths_and_float32_agrees_with_f
     assert val.item() == pytest.approx(ref.item(), rel=1e-5)
     assert torch.allclose(target_grad.double(), ref_target_grad, rtol=1e-3, atol=1e-7)
     assert torch.allclose(source_grad.double(), ref_source_grad, rtol=1e-3, atol=1e-7)
-
-
-def test_depth_anchor_is_zero_at_the_geometric_mean_and_grows_as_the_log_scale_squared():
-    # two frames a factor 4 apart whose geometric mean is the anchor: the anchor leaves them as they are
-    depth = torch.stack(
-        [torch.full((1, 3, 4), 0.05, dtype=torch.float64), torch.full((1, 3, 4), 0.2, dtype=torch.float64)]
-    )
-    assert depth_anchor_loss(depth, 0.1).item() == pytest.approx(0, abs=1e-15)
-    for k in (0.5, 3.0):
-        assert depth_anchor_loss(k * depth, 0.1).item() == pytest.approx(math.log(k) ** 2, rel=1e-12)
-
-
-def test_depth_anchor_gradient_scales_every_depth_toward_the_anchor_alike():
-    depth = (torch.rand(2, 1, 3, 4, dtype=torch.float64) + 0.5).requires_grad_()
-    depth_anchor_loss(depth * 2.0, 0.1).backward()  # geometric mean above the anchor
-    relative = depth.grad * depth  # d loss / d log depth: one value for every pixel of every frame
-    assert (relative > 0).all() and torch.allclose(relative, relative.flatten()[0].expand_as(relative))

@@ -1,6 +1,5 @@
 import copy
 import itertools
-import math
 
 import pytest
 import torch
@@ -478,38 +477,3 @@ def test_photometric_error_runs_eagerly_where_torch_compile_cannot_compile(monke
     assert compiled.photometric_error.fn is compiled.photometric_error.eager
     assert "torch.compile failed" in caplog.text and "no-such-compiler" in caplog.text
     assert all(torch.equal(got[k], want[k]) for k in want)
-
-
-@pytest.mark.parametrize("init_depth", [0.5, 3.0])
-def test_init_depth_starts_the_depth_there_and_changes_no_other_weight(init_depth):
-    torch.manual_seed(0)
-    plain = PoseConsModel(make_config(**{"model.min_depth": 0.1, "model.max_depth": 10.0}))
-    torch.manual_seed(0)
-    placed = PoseConsModel(
-        make_config(**{"model.min_depth": 0.1, "model.max_depth": 10.0, "model.init_depth": init_depth})
-    )
-    a, b = plain.state_dict(), placed.state_dict()
-    moved = [k for k in a if not torch.equal(a[k], b[k])]
-    assert moved and all(k.startswith("depth_net.decoder.disp_convs.") and k.endswith(".bias") for k in moved)
-    images = torch.rand(2, 3, H, W)
-    with torch.no_grad():
-        start = placed.eval().predict_depth(images)[1].median().item()
-        default = plain.eval().predict_depth(images)[1].median().item()
-    assert start == pytest.approx(init_depth, rel=0.25)  # the weights' noise spreads it a little
-    assert default == pytest.approx(0.2, rel=0.25)  # sigmoid 0.5: about twice min_depth
-
-
-def test_depth_anchor_adds_its_weighted_term_to_the_total():
-    torch.manual_seed(0)
-    batch = random_batch()
-    extra = {"model.min_depth": 0.1, "model.max_depth": 10.0, "model.init_depth": 0.5}
-    totals = {}
-    for w in (0, 2):
-        torch.manual_seed(1)
-        model = PoseConsModel(make_config(**extra, **{"loss.depth_anchor_weight": w}))
-        _, losses = model(batch)
-        totals[w] = losses["total"].item()
-    depth = model.predict_depth(batch["frames"][:, 0])[1]  # train mode, as in the step
-    expected = (depth.log().mean() - math.log(0.5)) ** 2
-    assert losses["anchor"].item() == pytest.approx(expected.item(), rel=1e-5)
-    assert totals[2] - totals[0] == pytest.approx(2 * losses["anchor"].item(), rel=1e-4)

@@ -60,7 +60,6 @@ RULES: dict[str, Check] = {
     "model.pretrained": _one_of(True, False, "auto"),
     "model.min_depth": _POSITIVE,
     "model.max_depth": _POSITIVE,
-    "model.init_depth": _at_least(0),
     "model.scales": _rule(
         lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
         "must be distinct scales from 0–3, e.g. [0, 1, 2, 3]",
@@ -79,7 +78,6 @@ RULES: dict[str, Check] = {
     "loss.depth_consistency_weight": _at_least(0),
     "loss.depth_consistency_form": _one_of("one_way", "sc_depth"),
     "loss.skip_weight": _at_least(0),
-    "loss.depth_anchor_weight": _at_least(0),
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
     "data.img_ext": _rule(bool, "must be an extension such as .png"),
@@ -128,17 +126,11 @@ class ModelConfig:
     width: int = 640
     min_depth: float = 0.1  # metres (up to the unknown scale of monocular training)
     max_depth: float = 100.0
-    # Depth the disparity heads start at (their bias; the same at every pixel up to the weights' noise).
-    # 0: PyTorch's bias init, sigmoid ≈ 0.5, i.e. about 2 × min_depth: at the near end of the range
-    init_depth: float = 0.0
     scales: list[int] = field(default_factory=lambda: [0, 1, 2, 3])  # decoder outputs at 1/2^s size; any of 0-3
     frame_ids: list[int] = field(default_factory=lambda: [0, -1, 1])  # target first, then sources
     # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
     # mirror-equivariant by construction (sideways motion, yaw and roll cannot hold a constant bias)
     pose_mirror: bool = False
-    # The pose decoder's last layer starts at zero, so every motion starts at exactly the identity and
-    # its first direction follows the photometric gradient instead of the random initial sign
-    pose_zero_init: bool = False
 
 
 @dataclass
@@ -165,11 +157,6 @@ class LossConfig:
     # taught by the cycle constraint alone (experiments/investigation.md §5); > 0 runs the depth net on
     # the sources too and the pose net on (−n, +n) every step
     skip_weight: float = 0.0
-    # (mean log depth of the batch's targets at scale 0 − log model.init_depth)², which holds the batch's
-    # geometric-mean depth where it started. View synthesis cannot see the scale that depth and
-    # translation share, and without it the depth can drift to an end of its range while the translation
-    # lags (experiments/investigation.md §13). > 0 needs model.init_depth
-    depth_anchor_weight: float = 0.0
 
 
 @dataclass
@@ -246,13 +233,6 @@ class Config:
         m, lo = self.model, self.loss
         if m.min_depth >= m.max_depth:
             raise PoseconsError(f"model.min_depth ({m.min_depth}) must be below model.max_depth ({m.max_depth})")
-        if lo.depth_anchor_weight > 0 and not m.init_depth:
-            raise PoseconsError("loss.depth_anchor_weight > 0 needs model.init_depth, the depth it holds the batch at")
-        if m.init_depth and not m.min_depth < m.init_depth < m.max_depth:
-            raise PoseconsError(
-                f"model.init_depth ({m.init_depth}) must lie between model.min_depth ({m.min_depth}) "
-                f"and model.max_depth ({m.max_depth}), or be 0 (off)"
-            )
         if m.height % 32 or m.width % 32 or m.height <= 0 or m.width <= 0:
             raise PoseconsError(
                 f"model.height/width must be positive multiples of 32 (the encoder downsamples 32×); "

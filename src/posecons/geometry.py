@@ -116,12 +116,6 @@ def disp_to_depth(disp: torch.Tensor, min_depth: float, max_depth: float) -> tup
     return scaled, 1 / scaled
 
 
-def depth_to_sigmoid(depth: float, min_depth: float, max_depth: float) -> float:
-    """The sigmoid output that :func:`disp_to_depth` maps to ``depth`` (its inverse)."""
-    min_disp, max_disp = 1 / max_depth, 1 / min_depth
-    return (1 / depth - min_disp) / (max_disp - min_disp)
-
-
 def scale_intrinsics(K_norm: torch.Tensor, height: int, width: int) -> torch.Tensor:
     """Normalised (B, 3, 3) K → pixel K for an image of ``height`` × ``width``.
 

@@ -4,8 +4,6 @@ constraints (SPEC §5) and SC-SfMLearner's depth consistency (an option). Each f
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 
@@ -79,16 +77,6 @@ def smoothness_loss(disp: torch.Tensor, img: torch.Tensor) -> torch.Tensor:
     grad_ix = (img[..., :, :-1] - img[..., :, 1:]).abs().mean(1, keepdim=True)
     grad_iy = (img[..., :-1, :] - img[..., 1:, :]).abs().mean(1, keepdim=True)
     return (grad_dx * torch.exp(-grad_ix)).mean() + (grad_dy * torch.exp(-grad_iy)).mean()
-
-
-def depth_anchor_loss(depth: torch.Tensor, anchor: float) -> torch.Tensor:
-    """(mean log depth − log ``anchor``)² over every pixel of the batch's depths (B, 1, H, W).
-
-    Scaling every depth and every translation by one factor leaves view synthesis unchanged; this fixes
-    that factor with the batch's geometric mean and nothing else, so each frame keeps its own scale
-    relative to the others."""
-    check_tensor("depth", depth, (None, 1, None, None))
-    return (depth.log().mean() - math.log(anchor)) ** 2
 
 
 def depth_consistency_loss(

@@ -20,18 +20,9 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .config import Config
-from .geometry import (
-    check_tensor,
-    depth_to_sigmoid,
-    disp_to_depth,
-    invert_pose,
-    pose_vec_to_mat,
-    scale_intrinsics,
-    warp,
-)
+from .geometry import check_tensor, disp_to_depth, invert_pose, pose_vec_to_mat, scale_intrinsics, warp
 from .losses import (
     cycle_loss,
-    depth_anchor_loss,
     depth_consistency_loss,
     depth_difference,
     forward_backward_loss,
@@ -95,9 +86,8 @@ class PoseConsModel(nn.Module):
         self.config = config
         m = config.model
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
-        start = depth_to_sigmoid(m.init_depth, m.min_depth, m.max_depth) if m.init_depth else None
-        self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales), start)
-        self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror, zero_init=m.pose_zero_init)
+        self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
+        self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror)
         self.photometric_error = (
             _CompiledOrEager(photometric_error) if config.train.compile_losses else photometric_error
         )
@@ -208,12 +198,8 @@ class PoseConsModel(nn.Module):
                 prev, nxt = self.cycle_ids()
                 losses["skip"] = self._skip_synthesis(frames.float(), K, source_disp, P.T(nxt, prev, input=(prev, nxt)))
                 terms.append("skip")
-            if lo.depth_anchor_weight > 0:
-                depth = disp_to_depth(disps[0].float(), m.min_depth, m.max_depth)[1]
-                losses["anchor"] = depth_anchor_loss(depth, m.init_depth)
-                terms.append("anchor")
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
-            weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight, anchor=lo.depth_anchor_weight)
+            weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight)
             losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in terms)
 
         outputs = {

@@ -4,7 +4,6 @@ with four sigmoid disparity scales, and a small pose decoder.
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -251,15 +250,9 @@ class Conv3x3(nn.Sequential):
 
 
 class DepthDecoder(nn.Module):
-    """U-Net decoder: returns sigmoid disparities ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale.
+    """U-Net decoder: returns sigmoid disparities ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale."""
 
-    ``init_sigmoid``: the output every head starts near (its bias = logit of it); None keeps PyTorch's
-    random bias, so sigmoid ≈ 0.5.
-    """
-
-    def __init__(
-        self, num_ch_enc: list[int], scales: tuple[int, ...] = (0, 1, 2, 3), init_sigmoid: float | None = None
-    ):
+    def __init__(self, num_ch_enc: list[int], scales: tuple[int, ...] = (0, 1, 2, 3)):
         super().__init__()
         self.scales = tuple(scales)
         ch = [16, 32, 64, 128, 256]
@@ -270,9 +263,6 @@ class DepthDecoder(nn.Module):
             self.up_in.append(Conv3x3(cin, ch[i]))
             self.up_out.append(Conv3x3(ch[i] + (num_ch_enc[i - 1] if i > 0 else 0), ch[i]))
         self.disp_convs = nn.ModuleDict({str(s): Conv3x3(ch[s], 1, elu=False) for s in self.scales})
-        if init_sigmoid is not None:  # draws no random numbers: every other weight starts as without it
-            for head in self.disp_convs.values():
-                nn.init.constant_(head[1].bias, math.log(init_sigmoid / (1 - init_sigmoid)))
 
     def forward(self, feats: list[torch.Tensor]) -> dict[int, torch.Tensor]:
         out = {}
@@ -310,12 +300,10 @@ class PoseDecoder(nn.Module):
 class DepthNet(nn.Module):
     """One RGB frame (B, 3, H, W) → sigmoid disparities per scale."""
 
-    def __init__(
-        self, num_layers: int = 18, imagenet: dict | None = None, scales=(0, 1, 2, 3), init_sigmoid: float | None = None
-    ):
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, scales=(0, 1, 2, 3)):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet)
-        self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales, init_sigmoid)
+        self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales)
 
     def forward(self, images: torch.Tensor) -> dict[int, torch.Tensor]:
         return self.decoder(self.encoder(images))
@@ -328,16 +316,11 @@ MIRROR_SIGN = torch.tensor([[1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]])
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(
-        self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False, zero_init: bool = False
-    ):
+    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, grouped=True)
         self.mirror = mirror
         self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
-        if zero_init:  # every motion starts at exactly the identity; draws no random numbers
-            nn.init.zeros_(self.decoder.net[-1].weight)
-            nn.init.zeros_(self.decoder.net[-1].bias)
 
     def forward(
         self,
