@@ -34,9 +34,9 @@ def stabilise_study(spec_name: str, study: Path, out: Path) -> list[Path]:
             continue
         depth = evaluate.checkpoint_depth(checkpoint, data.train_path, data.split, data.gt, SCALINGS, stabilised=True)
         stable = {s: depth[f"{s}_stabilised"] for s in SCALINGS}
-        write_json(
-            target, {**{k: result[k] for k in ("variant", "seed", "steps")}, "depth": stable, "pose": result["pose"]}
-        )
+        # the same run's network, so the same kind of run (report.run_kind pairs only runs of one kind)
+        kept = {k: result[k] for k in ("variant", "seed", "steps", "environment") if k in result}
+        write_json(target, {**kept, "depth": stable, "pose": result["pose"]})
         print(
             f"{target}: σ/μ {result['depth']['frame']['scale_cv']:.4f} → {stable['frame']['scale_cv']:.4f}", flush=True
         )
