@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +27,11 @@ from posecons.data.gt import load_gt
 from posecons.data.kitti_odometry import list_sequence_frames
 from posecons.data.splits import read_split
 from posecons.data.trajectory_io import read_kitti_poses
+from posecons.errors import PoseconsError
 from posecons.inference.backend import load_predictor, predict_batches
 from posecons.inference.media import frames_from_paths
+
+DRIVE = re.compile(r"drive_(\d+)")
 
 
 def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[str, float]:
@@ -37,10 +41,15 @@ def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[st
     split = read_split(study / "data" / "splits" / "synth" / "test_files.txt")
     scales = np.asarray(result["depth"]["frame"]["scales"])
     gts, _ = load_gt(study / "gt" / "test_depth.npz")
-    assert len(scales) == len(split) == len(gts), "the study's scales must cover every test frame"
+    if not len(scales) == len(split) == len(gts):
+        raise PoseconsError(f"{run}: {len(scales)} frame scales for {len(split)} test frames and {len(gts)} depth maps")
+    by_sequence: dict[str, list[int]] = {}  # the test frames of each drive, by its odometry sequence
+    for k, line in enumerate(split):
+        drive = int(DRIVE.search(line.folder).group(1))
+        by_sequence.setdefault(f"{drive:02d}", []).append(k)
     odometry = study / "data" / "odometry"
     log_s, log_r, log_gt = [], [], []
-    for sequence in dict.fromkeys(re.search(r"drive_(\d+)", line.folder).group(1)[-2:] for line in split):
+    for sequence, rows in by_sequence.items():
         frames = frames_from_paths(list_sequence_frames(odometry, sequence))
         images = torch.from_numpy(
             np.concatenate([x for _, x, _ in predict_batches(predictor, frames, 32, depth=False)])
@@ -50,12 +59,12 @@ def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[st
         with torch.no_grad():
             t = predictor.model.pose_net(images[:-stride], images[stride:])[1][:, 0].double().numpy()
         r = true / np.linalg.norm(t, axis=1)  # r[i]: the pair (i, i + stride)
-        for k, line in enumerate(split):
-            if f"drive_00{sequence}" in line.folder and line.frame < len(r) and true[line.frame] >= min_motion:
-                gt = gts[k][gts[k] > 0]
+        for k in rows:
+            i = split[k].frame
+            if i < len(r) and true[i] >= min_motion:
                 log_s.append(np.log(scales[k]))
-                log_r.append(np.log(r[line.frame]))
-                log_gt.append(np.log(np.median(gt)))
+                log_r.append(np.log(r[i]))
+                log_gt.append(np.log(np.median(gts[k][gts[k] > 0])))
     s, r, g = map(np.asarray, (log_s, log_r, log_gt))
     corr = np.corrcoef(s, r)[0, 1]
     return {
@@ -79,7 +88,11 @@ def main() -> None:
     print("| run | moving frames | sd log s | sd log r | corr(log s, log r) | corr with log median LiDAR: s, r |")
     print("|---|---:|---:|---:|---:|---:|")
     for run in args.runs:
-        st = pose_scale(args.study, run, args.stride, args.min_motion)
+        try:
+            st = pose_scale(args.study, run, args.stride, args.min_motion)
+        except (OSError, KeyError, ValueError, PoseconsError) as exc:  # a missing run or file, a bad name
+            print(f"error: {run}: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
         print(
             f"| {run} | {st['frames']} | {st['sd_log_s']:.3f} | {st['sd_log_r']:.3f} | {st['corr_s_r']:+.2f} "
             f"({100 * st['explained']:.0f} %) | {st['corr_s_gt']:+.2f}, {st['corr_r_gt']:+.2f} |"
