@@ -35,7 +35,9 @@ DRIVE = re.compile(r"drive_(\d+)")
 
 
 def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[str, float]:
-    variant, seed = run.split("/seed")
+    variant, _, seed = run.partition("/seed")
+    if not seed.isdigit():
+        raise PoseconsError("expected VARIANT/seedK, e.g. baseline/seed0")
     result = json.loads((study / "results" / f"{variant}_seed{seed}.json").read_text())
     predictor = load_predictor(study / "runs" / run / "checkpoints" / "last.pt", "cpu")
     split = read_split(study / "data" / "splits" / "synth" / "test_files.txt")
