@@ -94,6 +94,7 @@ def world(make_synth, tmp_path_factory) -> dict[str, Path]:
     (inp / "two_times.txt").write_text("0\n0.1\n")
     (inp / "static.txt").write_text("2011_09_26 drive_0001 not-a-frame\n")
     (inp / "result.json").write_text('{"abs_rel": 0.1}')
+    shutil.copytree(syn, inp / "no_oxts", ignore=shutil.ignore_patterns("oxts"))  # as `prepare` writes a video
     # an RGB-D sequence (3 frames, 16 × 12) and broken files beside it, picked by each case's patterns
     rgbd = inp / "rgbd"
     write_sequence(rgbd)
@@ -316,6 +317,11 @@ CASES = [
     ("train-unknown-key", TRAIN + " --set train.bach_size=2", ["unknown config key 'train.bach_size'"]),
     ("train-unknown-preset", TRAIN.replace("kitti/baseline", "kitti/nope"), ["'kitti/nope'", "bundled preset"]),
     ("train-missing-data", TRAIN.replace("--data-path {syn}", "--data-path {in}/nope"), ["nope", "not a directory"]),
+    (
+        "train-velocity-without-oxts",
+        TRAIN.replace("--data-path {syn}", "--data-path {in}/no_oxts") + " --set loss.velocity_weight=0.05",
+        ["no_oxts/2020_01_01", "oxts/data", "OXTS packet not found", "loss.velocity_weight"],
+    ),
     ("train-resume-without-run", TRAIN + " --resume", ["last.pt does not exist"]),
     ("train-batch-too-large", TRAIN + " --set train.batch_size=64", ["fewer than one batch", "train.batch_size"]),
     (

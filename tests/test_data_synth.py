@@ -20,6 +20,7 @@ from posecons.data.synth import drive_folder, make_drive
 from posecons.data.synth.render import camera_depth_at
 from posecons.data.synth.rig import Rig
 from posecons.data.trajectory_io import read_kitti_poses
+from posecons.errors import PoseconsError
 
 W, H, FRAMES, SEED = 312, 96, 12, 3
 
@@ -164,6 +165,21 @@ def test_odometry_dataset(synth: Path) -> None:
     np.testing.assert_allclose(sample["intrinsics"].numpy(), raw_intrinsics(synth / "2020_01_01"), rtol=1e-5)
     raw = KittiRawDataset(synth, [f"{drive_folder(1)} 1 l"], H, W, train=False)[0]
     assert torch.equal(sample["frames"], raw["frames"])
+
+
+def test_distances_travelled_are_the_generators_true_ones(synth: Path, tmp_path: Path) -> None:
+    """Odometry: camera 0's true distance; raw: the INS unit's (they differ by the lever arm in turns).
+    A mirror image travels as far."""
+    drive, rig, ids = make_drive(SEED, 1, FRAMES), Rig(W, H), (0, -2, 1)
+    cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])[:, :3, 3]
+    imu = drive.trajectory.imu_poses[:, :3, 3]
+    odom = KittiOdometryDataset(synth / "odometry", ["1 3 l"], H, W, frame_ids=ids, with_distances=True)
+    np.testing.assert_allclose(odom[0]["distances"].numpy(), np.linalg.norm(cam0[[1, 4]] - cam0[3], axis=1), rtol=1e-5)
+    raw = KittiRawDataset(synth, [f"{drive_folder(1)} 3 l"], H, W, frame_ids=ids, with_distances=True, flip_prob=1.0)
+    np.testing.assert_allclose(raw[0]["distances"].numpy(), np.linalg.norm(imu[[1, 4]] - imu[3], axis=1), rtol=1e-5)
+    (tmp_path / "sequences").symlink_to(synth / "odometry" / "sequences")
+    with pytest.raises(PoseconsError, match=r"poses/01.txt: odometry ground-truth poses not found .*velocity_weight"):
+        KittiOdometryDataset(tmp_path, ["1 3 l"], H, W, frame_ids=ids, with_distances=True)
 
 
 def test_build_split_on_synth(synth: Path) -> None:

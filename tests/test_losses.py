@@ -14,6 +14,7 @@ from posecons.losses import (
     photometric_error,
     smoothness_loss,
     ssim_dissimilarity,
+    velocity_loss,
 )
 
 
@@ -102,6 +103,31 @@ def test_identity_loss():
     t[0, 0] = torch.tensor([0.1, 0.2, -0.2])  # ‖·‖₁ = 0.5, ‖·‖₂ = 0.3
     t[1, 0, 2] = -0.6
     assert identity_loss(aa, t).item() == pytest.approx((0.7 + 0.5 + 0.6 + 0) / 3)  # the mean over the batch
+
+
+def test_velocity_loss_asks_for_lengths_in_proportion_to_the_distances():
+    """Mutations caught: ‖·‖₁ instead of ‖·‖₂ (0.7 against 0.5 below), a squared error, no
+    normalisation, ŝ from the ratio of means of another pairing, a gradient through ŝ."""
+    t = torch.tensor([[[0.3, 0.4, 0.0]], [[0.0, -0.6, 0.8]]], requires_grad=True)  # lengths 0.5 and 1.0
+    for d in ([0.5, 1.0], [5.0, 10.0]):  # any common scale is free
+        assert velocity_loss(t, torch.tensor(d)).item() == pytest.approx(0, abs=1e-7)
+    # d = (1, 1): ŝ = 1.5 / 2 = 0.75, |0.5 − 0.75| + |1.0 − 0.75| = 0.5, / 2 pairs / mean length 0.75
+    loss = velocity_loss(t, torch.tensor([1.0, 1.0]))
+    assert loss.item() == pytest.approx(0.5 / 2 / 0.75)
+    assert velocity_loss(3 * t, torch.tensor([1.0, 1.0])).item() == pytest.approx(loss.item())  # no pull to shrink
+    loss.backward()
+    # descending the gradient lengthens the shorter translation and shortens the longer one, by the same amount
+    assert (t.grad[0] * t[0]).sum() < 0 and (t.grad[1] * t[1]).sum() > 0
+    assert t.grad[0].norm().item() == pytest.approx(t.grad[1].norm().item()) == pytest.approx(1 / 2 / 0.75)
+    assert velocity_loss(t, torch.tensor([0.0, 0.0])).item() == pytest.approx(1.0)  # standing still: no translation
+    # lengths 1, 1, 4 against equal distances: ŝ = 2, and with ŝ and the mean length detached each
+    # gradient is sign(‖t‖ − ŝd) along t / (3 pairs · mean length 2)
+    u = torch.tensor([[[1.0, 0, 0]], [[0, 1.0, 0]], [[0, 0, 4.0]]], requires_grad=True)
+    velocity_loss(u, torch.ones(3)).backward()
+    expected = torch.tensor([[[-1.0, 0, 0]], [[0, -1.0, 0]], [[0, 0, 1.0]]]) / 6
+    assert torch.allclose(u.grad, expected)
+    with pytest.raises(ValueError, match="distance"):
+        velocity_loss(t, torch.ones(3))
 
 
 def test_bad_inputs_raise_value_error():

@@ -139,6 +139,31 @@ def test_pose_conventions_with_true_motion(n):
     assert good["photometric"] < 0.3 * flipped["photometric"]  # the right direction explains the motion
 
 
+@pytest.mark.parametrize("layout", ["right", "sources_swapped", "samples_transposed"])
+def test_velocity_loss_pairs_each_source_distance_with_its_own_pose(layout):
+    """True motion v per frame, sources −1 and +2: the translations are v and 2v long. Distances in
+    the batch's (sample, source) layout, in any unit, give zero; swapping the sources or reading the
+    (B, S) tensor in the other order does not."""
+    frame_ids, v = [0, -1, 2], 0.3
+    frames = sliding_scene(2, frame_ids)
+    model = PoseConsModel(make_config(**{"model.frame_ids": "[0,-1,2]", "loss.velocity_weight": 0.5}))
+    model.pose_net = TrajectoryPoseNet(frames, frame_ids, world_poses(frame_ids, 0.05, step=(v, 0, 0)))
+    d = {
+        "right": [[1.0, 2.0], [1.0, 2.0]],
+        "sources_swapped": [[2.0, 1.0], [2.0, 1.0]],
+        "samples_transposed": [[1.0, 1.0], [2.0, 2.0]],
+    }[layout]
+    batch = {"frames": frames, "intrinsics": random_batch()["intrinsics"], "distances": torch.tensor(d)}
+    _, losses = model(batch)
+    # lengths (v, v, 2v, 2v) source-major, ŝ = v: mean |error| over the mean length 1.5v
+    expected = {"right": 0.0, "sources_swapped": 1.0 / 1.5, "samples_transposed": 0.5 / 1.5}[layout]
+    assert losses["velocity"].item() == pytest.approx(expected, abs=1e-5)
+    rest = losses["photometric"] + losses["smoothness"]
+    assert losses["total"].item() == pytest.approx((rest + 0.5 * losses["velocity"]).item(), rel=1e-6)
+    with pytest.raises(ValueError, match="distances"):
+        model({"frames": frames, "intrinsics": batch["intrinsics"]})
+
+
 @pytest.mark.parametrize("dc_weight", [0.0, 0.1])
 def test_mixed_precision_keeps_network_outputs_geometry_and_losses_in_fp32(dc_weight):
     model = PoseConsModel(make_config(ALL, **{"loss.depth_consistency_weight": dc_weight}))

@@ -78,6 +78,7 @@ RULES: dict[str, Check] = {
     "loss.depth_consistency_weight": _at_least(0),
     "loss.depth_consistency_form": _one_of("one_way", "sc_depth"),
     "loss.skip_weight": _at_least(0),
+    "loss.velocity_weight": _at_least(0),
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
     "data.img_ext": _rule(bool, "must be an extension such as .png"),
@@ -157,6 +158,10 @@ class LossConfig:
     # taught by the cycle constraint alone (experiments/investigation.md §5); > 0 runs the depth net on
     # the sources too and the pose net on (−n, +n) every step
     skip_weight: float = 0.0
+    # Velocity supervision (PackNet-SfM; not in the paper): |‖t‖ − d| for each source pair, d the metres
+    # travelled between the frames (raw: oxts/, odometry: poses/NN.txt). > 0 makes depth and pose metric
+    # on every training pair instead of each pair choosing its own scale; needs those files for training
+    velocity_weight: float = 0.0
 
 
 @dataclass

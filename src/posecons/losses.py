@@ -135,3 +135,23 @@ def cycle_loss(t_skip: torch.Tensor, t_second: torch.Tensor, t_first: torch.Tens
     check_tensor("t_second", t_second, (None, 4, 4))
     check_tensor("t_first", t_first, tuple(t_second.shape))
     return pose_distance(t_skip, t_second @ t_first).mean()
+
+
+# ----------------------------------------------------------------------------- measured speed (not in the paper)
+
+
+def velocity_loss(translation: torch.Tensor, distance: torch.Tensor) -> torch.Tensor:
+    """mean |‖t‖₂ − ŝ·d| / mean ‖t‖₂ over the batch's pairs, ŝ = Σ‖t‖₂ / Σd (both detached): each
+    translation's length in proportion to the metres d travelled between its frames. PackNet-SfM's
+    velocity supervision asks for ‖t‖ = d; here one scale ŝ a batch is left free, because a pose net
+    that outputs 0.01 × its activations cannot reach metres in a short run, and the normalisation keeps
+    the term from pulling every translation (and so the depth) smaller. A pair that stands still
+    (d = 0) is asked for no translation.
+
+    translation: the pose net's raw t (N, 1, 3) of N pairs; distance: (N,) metres.
+    """
+    check_tensor("translation", translation, (None, 1, 3))
+    check_tensor("distance", distance, (translation.shape[0],))
+    length = translation.norm(dim=-1).squeeze(1)
+    scale = (length.sum() / distance.sum().clamp(min=1e-12)).detach()
+    return (length - scale * distance).abs().mean() / length.mean().detach().clamp(min=1e-12)

@@ -8,6 +8,7 @@ Batch keys (see ``posecons.data``):
     intrinsics  (B, 3, 3) normalised K (row 0 / W, row 1 / H)
     net_frames  (B, F, 3, H, W) optional: what the networks see, e.g. colour-jittered by
                 :func:`posecons.data.augment.jitter_batch`; the losses always use ``frames`` (SPEC §6)
+    distances   (B, F − 1) metres travelled from the target to each source: needed by loss.velocity_weight
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from .losses import (
     min_reprojection,
     photometric_error,
     smoothness_loss,
+    velocity_loss,
 )
 from .networks import DepthNet, PoseNet, imagenet_weights_name, load_imagenet_state
 
@@ -198,8 +200,16 @@ class PoseConsModel(nn.Module):
                 prev, nxt = self.cycle_ids()
                 losses["skip"] = self._skip_synthesis(frames.float(), K, source_disp, P.T(nxt, prev, input=(prev, nxt)))
                 terms.append("skip")
+            if lo.velocity_weight > 0:  # each source pair's translation against the measured distance
+                if "distances" not in batch:
+                    raise ValueError("loss.velocity_weight > 0 needs batch['distances'] (metres to each source)")
+                d = check_tensor("batch['distances']", batch["distances"], (frames.shape[0], len(sources))).float()
+                losses["velocity"] = velocity_loss(
+                    torch.cat([P.vector(*temporal(f))[1] for f in sources]), d.t().reshape(-1)
+                )
+                terms.append("velocity")
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
-            weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight)
+            weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight, velocity=lo.velocity_weight)
             losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in terms)
 
         outputs = {

@@ -4,7 +4,9 @@ Sample contract (the model relies on it):
     ``frames``     float32 (F, 3, H, W) in [0, 1], in ``frame_ids`` order, flipped if drawn;
     ``intrinsics`` float32 (3, 3) K normalised by image size, mirrored when flipped (``flip_intrinsics``);
     ``color_aug``  float32 (4,) jitter factors (b, c, s, h), (1, 1, 1, 0) when not drawn;
-    ``index`` int, ``folder`` str, ``frame`` int, ``side`` str.
+    ``index`` int, ``folder`` str, ``frame`` int, ``side`` str;
+    ``distances``  float32 (F − 1,) with ``with_distances``: metres travelled between the target and
+                   each source, from the drive's GNSS/INS (raw) or ground-truth poses (odometry).
 
 With a frame cache (:mod:`.cache`) the resized pixels come from it instead of the image files;
 everything else, and every value of the sample, is the same.
@@ -78,6 +80,7 @@ class FrameDataset(Dataset):
         skip_incomplete: bool = False,
         cache: FrameCache | None = None,
         jpeg_draft: bool = False,
+        with_distances: bool = False,
     ) -> None:
         self.data_path = Path(data_path)
         self.lines: list[SplitLine] = read_split(split)
@@ -91,6 +94,7 @@ class FrameDataset(Dataset):
         self.skip_incomplete = skip_incomplete
         self.cache = cache
         self.jpeg_draft = jpeg_draft
+        self.with_distances = with_distances
         if check_files:
             self.check_files()
         self._first = {(line.folder, line.side): line for line in reversed(self.lines)}  # first line per camera
@@ -103,6 +107,10 @@ class FrameDataset(Dataset):
 
     def calib_k(self, line: SplitLine) -> np.ndarray:
         """Normalised (3, 3) K of ``line``'s camera from its calibration file."""
+        raise NotImplementedError
+
+    def positions(self, line: SplitLine, frames: list[int]) -> np.ndarray:
+        """Metric positions (N, 3) of ``line``'s camera rig at ``frames``, in any one world frame."""
         raise NotImplementedError
 
     # -- shared logic -------------------------------------------------------------------------
@@ -131,6 +139,11 @@ class FrameDataset(Dataset):
             self.lines = complete
             if not complete:
                 raise PoseconsError(f"{source}: no line has all of its frames {list(self.frame_ids)}")
+        for line in self.lines if self.with_distances else []:
+            try:
+                self.positions(line, [line.frame + o for o in self.frame_ids])
+            except PoseconsError as exc:
+                raise PoseconsError(f"{exc} (loss.velocity_weight needs the distance travelled)") from exc
         for line in self.lines if self.cache is not None else []:
             for o in self.frame_ids:
                 cached = self.cache.file(self.image_path(line, line.frame + o))
@@ -186,6 +199,10 @@ class FrameDataset(Dataset):
             [self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids]
         )
         k = torch.from_numpy(self.intrinsics(line).astype(np.float32))
+        extra = {}
+        if self.with_distances:  # a mirror image keeps the distance
+            p = self.positions(line, [line.frame + f for f in self.frame_ids])
+            extra["distances"] = torch.from_numpy(np.linalg.norm(p[1:] - p[0], axis=-1).astype(np.float32))
         return {
             "frames": frames,
             "intrinsics": flip_intrinsics(k, self.width) if flip else k,
@@ -194,4 +211,5 @@ class FrameDataset(Dataset):
             "folder": line.folder,
             "frame": line.frame,
             "side": line.side,
+            **extra,
         }

@@ -13,6 +13,7 @@ from ..fileio import require_file
 from .calib import calib_matrix, pixel_to_normalised, read_calib_file
 from .frames import FrameDataset
 from .splits import SIDE_TO_CAMERA, SplitLine
+from .trajectory_io import read_kitti_poses
 
 
 def sequence_dir(data_path: Path, sequence: int | str) -> Path:
@@ -66,8 +67,20 @@ class KittiOdometryDataset(FrameDataset):
             self._k_cache[key] = pixel_to_normalised(P, height, width).astype(np.float32)
         return self._k_cache[key]
 
+    def positions(self, line: SplitLine, frames: list[int]) -> np.ndarray:
+        """Camera 0's positions from the ground-truth ``<data_path>/poses/<NN>.txt`` (read once a sequence)."""
+        sequence = int(line.folder)
+        if sequence not in self._positions:
+            path = require_file(Path(self.data_path) / "poses" / f"{sequence:02d}.txt", "odometry ground-truth poses")
+            self._positions[sequence] = read_kitti_poses(path)[:, :3, 3]
+        known = self._positions[sequence]
+        if max(frames) >= len(known):
+            raise PoseconsError(f"{self.data_path}/poses/{sequence:02d}.txt: no pose for frame {max(frames)}")
+        return known[list(frames)]
+
     def __init__(self, *args, **kwargs) -> None:
         self._k_cache: dict[tuple[int, str], np.ndarray] = {}
+        self._positions: dict[int, np.ndarray] = {}
         super().__init__(*args, **kwargs)
 
     def check_files(self) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 from ..errors import PoseconsError
 from .calib import raw_intrinsics
 from .frames import FrameDataset
+from .oxts import oxts_to_poses, read_oxts
 from .splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
 
 IMAGE_EXTENSIONS = (".png", ".jpg")  # what split_image_paths looks for: KITTI's PNGs or a JPEG copy
@@ -46,3 +47,9 @@ class KittiRawDataset(FrameDataset):
     def calib_k(self, line: SplitLine) -> np.ndarray:
         date = line.folder.split("/")[0]
         return raw_intrinsics(self.data_path / date, SIDE_TO_CAMERA[line.side])
+
+    def positions(self, line: SplitLine, frames: list[int]) -> np.ndarray:
+        """The GNSS/INS unit's positions from ``<folder>/oxts/data/<frame:010d>.txt`` (the camera's
+        displacement differs from it only by the lever arm turned through the frames' rotation)."""
+        folder = self.data_path / line.folder / "oxts" / "data"
+        return oxts_to_poses(read_oxts([folder / f"{f:010d}.txt" for f in frames]))[:, :3, 3]
