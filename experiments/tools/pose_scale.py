@@ -7,6 +7,10 @@ compression of far scenes, experiments/investigation.md §4, §13). Frames whose
 pair is under --min-motion metres (stops) have no scale in t and are left out.
 
     python experiments/tools/pose_scale.py --study OUT baseline/seed0 [anchor/seed4 ...]
+    python experiments/tools/pose_scale.py --study OUT --by-drive vel01/seed0   # every drive, trained ones too
+
+``--by-drive`` prints, for every drive's moving pairs, the sd of log r and the median r: whether the
+pose net's scale holds within and across the drives it was trained on and the held-out ones.
 
 OUT is a `posecons study --out` folder of synthetic data (`posecons synth` writes each drive's
 odometry sequence under the drive's number).
@@ -34,12 +38,38 @@ from posecons.inference.media import frames_from_paths
 DRIVE = re.compile(r"drive_(\d+)")
 
 
-def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[str, float]:
+def load_run(study: Path, run: str):
     variant, _, seed = run.partition("/seed")
     if not seed.isdigit():
         raise PoseconsError("expected VARIANT/seedK, e.g. baseline/seed0")
     result = json.loads((study / "results" / f"{variant}_seed{seed}.json").read_text())
-    predictor = load_predictor(study / "runs" / run / "checkpoints" / "last.pt", "cpu")
+    return result, load_predictor(study / "runs" / run / "checkpoints" / "last.pt", "cpu")
+
+
+def pair_ratios(predictor, odometry: Path, sequence: str, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """For the pairs (i, i + stride) of a drive: the true distance |t_true| and r = |t_true| / |t_pred|."""
+    frames = frames_from_paths(list_sequence_frames(odometry, sequence))
+    images = torch.from_numpy(np.concatenate([x for _, x, _ in predict_batches(predictor, frames, 32, depth=False)]))
+    poses = read_kitti_poses(odometry / "poses" / f"{sequence}.txt")
+    true = np.linalg.norm((np.linalg.inv(poses[stride:]) @ poses[:-stride])[:, :3, 3], axis=1)
+    with torch.no_grad():
+        t = predictor.model.pose_net(images[:-stride], images[stride:])[1][:, 0].double().numpy()
+    return true, true / np.linalg.norm(t, axis=1)
+
+
+def by_drive(study: Path, run: str, stride: int, min_motion: float) -> str:
+    _, predictor = load_run(study, run)
+    odometry = study / "data" / "odometry"
+    cells = []
+    for sequence in sorted(p.stem for p in (odometry / "poses").glob("*.txt")):
+        true, r = pair_ratios(predictor, odometry, sequence, stride)
+        log_r = np.log(r[true >= min_motion])
+        cells.append(f"{log_r.std():.3f} / {np.exp(np.median(log_r)):.0f}")
+    return f"| {run} | " + " | ".join(cells) + " |"
+
+
+def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[str, float]:
+    result, predictor = load_run(study, run)
     split = read_split(study / "data" / "splits" / "synth" / "test_files.txt")
     scales = np.asarray(result["depth"]["frame"]["scales"])
     gts, _ = load_gt(study / "gt" / "test_depth.npz")
@@ -52,15 +82,7 @@ def pose_scale(study: Path, run: str, stride: int, min_motion: float) -> dict[st
     odometry = study / "data" / "odometry"
     log_s, log_r, log_gt = [], [], []
     for sequence, rows in by_sequence.items():
-        frames = frames_from_paths(list_sequence_frames(odometry, sequence))
-        images = torch.from_numpy(
-            np.concatenate([x for _, x, _ in predict_batches(predictor, frames, 32, depth=False)])
-        )
-        poses = read_kitti_poses(odometry / "poses" / f"{sequence}.txt")
-        true = np.linalg.norm((np.linalg.inv(poses[stride:]) @ poses[:-stride])[:, :3, 3], axis=1)
-        with torch.no_grad():
-            t = predictor.model.pose_net(images[:-stride], images[stride:])[1][:, 0].double().numpy()
-        r = true / np.linalg.norm(t, axis=1)  # r[i]: the pair (i, i + stride)
+        true, r = pair_ratios(predictor, odometry, sequence, stride)  # r[i]: the pair (i, i + stride)
         for k in rows:
             i = split[k].frame
             if i < len(r) and true[i] >= min_motion:
@@ -86,11 +108,20 @@ def main() -> None:
     p.add_argument("runs", nargs="+", help="VARIANT/seedK")
     p.add_argument("--stride", type=int, default=3, help="frame offset of the pairs (the training offset)")
     p.add_argument("--min-motion", type=float, default=0.5, help="metres over a pair below which a frame is a stop")
+    p.add_argument("--by-drive", action="store_true", help="sd of log r / median r on every drive instead")
     args = p.parse_args()
-    print("| run | moving frames | sd log s | sd log r | corr(log s, log r) | corr with log median LiDAR: s, r |")
-    print("|---|---:|---:|---:|---:|---:|")
+    if args.by_drive:
+        drives = sorted(p.stem for p in (args.study / "data" / "odometry" / "poses").glob("*.txt"))
+        print("| run | " + " | ".join(f"drive {d}: sd log r / median r" for d in drives) + " |")
+        print("|---|" + "---:|" * len(drives))
+    else:
+        print("| run | moving frames | sd log s | sd log r | corr(log s, log r) | corr with log median LiDAR: s, r |")
+        print("|---|---:|---:|---:|---:|---:|")
     for run in args.runs:
         try:
+            if args.by_drive:
+                print(by_drive(args.study, run, args.stride, args.min_motion))
+                continue
             st = pose_scale(args.study, run, args.stride, args.min_motion)
         except (OSError, KeyError, ValueError, PoseconsError) as exc:  # a missing run or file, a bad name
             print(f"error: {run}: {exc}", file=sys.stderr)
