@@ -158,9 +158,10 @@ class LossConfig:
     # taught by the cycle constraint alone (experiments/investigation.md §5); > 0 runs the depth net on
     # the sources too and the pose net on (−n, +n) every step
     skip_weight: float = 0.0
-    # Velocity supervision (PackNet-SfM; not in the paper): |‖t‖ − d| for each source pair, d the metres
-    # travelled between the frames (raw: oxts/, odometry: poses/NN.txt). > 0 makes depth and pose metric
-    # on every training pair instead of each pair choosing its own scale; needs those files for training
+    # Velocity supervision (PackNet-SfM's, one scale a batch left free; not in the paper, not
+    # self-supervised): each source pair's translation length in proportion to the metres travelled
+    # (raw: oxts/, odometry: poses/NN.txt; losses.velocity_loss). One scale for every training pair,
+    # not metres; needs those files for the training split
     velocity_weight: float = 0.0
 
 
