@@ -107,7 +107,7 @@ def test_identity_loss():
 
 def test_velocity_loss_asks_for_lengths_in_proportion_to_the_distances():
     """Mutations caught: ‖·‖₁ instead of ‖·‖₂ (0.7 against 0.5 below), a squared error, no
-    normalisation, ŝ from the ratio of means of another pairing, a gradient through ŝ."""
+    normalisation, a gradient through ŝ or the mean length."""
     t = torch.tensor([[[0.3, 0.4, 0.0]], [[0.0, -0.6, 0.8]]], requires_grad=True)  # lengths 0.5 and 1.0
     for d in ([0.5, 1.0], [5.0, 10.0]):  # any common scale is free
         assert velocity_loss(t, torch.tensor(d)).item() == pytest.approx(0, abs=1e-7)
