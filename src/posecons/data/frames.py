@@ -94,9 +94,10 @@ class FrameDataset(Dataset):
         self.skip_incomplete = skip_incomplete
         self.cache = cache
         self.jpeg_draft = jpeg_draft
-        self.with_distances = with_distances
         if check_files:
             self.check_files()
+        # Read once here (each line's position files), not again for every sample of every epoch.
+        self.distances = [self.travelled(line) for line in self.lines] if with_distances else None
         self._first = {(line.folder, line.side): line for line in reversed(self.lines)}  # first line per camera
         self._sizes: dict[tuple[str, str], tuple[Path, tuple[int, int]]] = {}
 
@@ -114,6 +115,14 @@ class FrameDataset(Dataset):
         raise NotImplementedError
 
     # -- shared logic -------------------------------------------------------------------------
+    def travelled(self, line: SplitLine) -> np.ndarray:
+        """float32 (F − 1,): metres from ``line``'s target frame to each source (a mirror image keeps them)."""
+        try:
+            p = self.positions(line, [line.frame + f for f in self.frame_ids])
+        except PoseconsError as exc:
+            raise PoseconsError(f"{exc} (loss.velocity_weight needs the distance travelled)") from exc
+        return np.linalg.norm(p[1:] - p[0], axis=-1).astype(np.float32)
+
     def check_files(self) -> None:
         """Fail early, naming the split line, when a frame or its neighbours are missing; with
         ``skip_incomplete``, drop such lines instead (e.g. near drive ends when the frame offsets
@@ -139,11 +148,6 @@ class FrameDataset(Dataset):
             self.lines = complete
             if not complete:
                 raise PoseconsError(f"{source}: no line has all of its frames {list(self.frame_ids)}")
-        for line in self.lines if self.with_distances else []:
-            try:
-                self.positions(line, [line.frame + o for o in self.frame_ids])
-            except PoseconsError as exc:
-                raise PoseconsError(f"{exc} (loss.velocity_weight needs the distance travelled)") from exc
         for line in self.lines if self.cache is not None else []:
             for o in self.frame_ids:
                 cached = self.cache.file(self.image_path(line, line.frame + o))
@@ -199,10 +203,7 @@ class FrameDataset(Dataset):
             [self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids]
         )
         k = torch.from_numpy(self.intrinsics(line).astype(np.float32))
-        extra = {}
-        if self.with_distances:  # a mirror image keeps the distance
-            p = self.positions(line, [line.frame + f for f in self.frame_ids])
-            extra["distances"] = torch.from_numpy(np.linalg.norm(p[1:] - p[0], axis=-1).astype(np.float32))
+        extra = {} if self.distances is None else {"distances": torch.from_numpy(self.distances[index])}
         return {
             "frames": frames,
             "intrinsics": flip_intrinsics(k, self.width) if flip else k,
