@@ -65,6 +65,14 @@ def test_bad_values_are_rejected(override, message):
         load_config(overrides=[override])
 
 
+@pytest.mark.parametrize("extra", ["loss.constraints=[fb]", "loss.skip_weight=0.1", "loss.velocity_weight=0.1"])
+def test_known_motion_refuses_every_loss_that_trains_the_pose_net(extra):
+    assert load_config(overrides=["model.known_motion=true"]).model.known_motion
+    assert load_config(overrides=[extra]).model.known_motion is False
+    with pytest.raises(PoseconsError, match=r"^model.known_motion=true leaves the pose net untrained"):
+        load_config(overrides=["model.known_motion=true", extra])
+
+
 @pytest.mark.parametrize(
     "value,meaning", [("epoch", "epoch"), ("off", "off"), ("false", "off"), ("0", "epoch"), ("250", 250)]
 )

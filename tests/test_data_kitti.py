@@ -131,16 +131,22 @@ def test_real_raw_dataset(kitti_dir: Path) -> None:
     assert (left["folder"], left["frame"], left["side"]) == (DRIVE, 5, "l")
 
 
-def test_real_raw_dataset_gives_the_distance_travelled_to_each_source(kitti_dir: Path) -> None:
-    """Frames 4 and 7 seen from 5: the OXTS speed times the time between the frames, each on its side."""
+def test_real_raw_dataset_gives_the_camera_motion_to_each_source(kitti_dir: Path) -> None:
+    """Frames 4 and 7 seen from 5 on a drive going straight ahead: each motion's length is the OXTS
+    speed times the time between the frames, and it is along the optical axis (a target point is
+    further away in the earlier frame, nearer in the later one). The two cameras move alike."""
     raw = kitti_dir / "raw_samples"
-    ds = KittiRawDataset(raw, [f"{DRIVE} 5 l"], 96, 320, frame_ids=(0, -1, 2), with_distances=True)
+    lines = [f"{DRIVE} 5 l", f"{DRIVE} 5 r"]
+    ds = KittiRawDataset(raw, lines, 96, 320, frame_ids=(0, -1, 2), train=False, with_motion=True)
     stamps = (raw / DRIVE / "oxts" / "timestamps.txt").read_text().split("\n")[:10]
     seconds = np.array([float(s.split(":")[-1]) for s in stamps])
     speed = np.hypot(*read_oxts(sorted((raw / DRIVE / "oxts" / "data").glob("*.txt")))[:, 6:8].T)
     expected = [speed[4:6].mean() * (seconds[5] - seconds[4]), speed[5:8].mean() * (seconds[7] - seconds[5])]
-    np.testing.assert_allclose(ds[0]["distances"].numpy(), expected, rtol=0.03)
-    assert "distances" not in KittiRawDataset(raw, [f"{DRIVE} 5 l"], 96, 320)[0]
+    left, right = ds[0]["motions"].numpy(), ds[1]["motions"].numpy()
+    np.testing.assert_allclose(np.linalg.norm(left[:, :3, 3], axis=1), expected, rtol=0.03)
+    np.testing.assert_allclose(left[:, 2, 3] / expected, [1, -1], atol=0.05)
+    np.testing.assert_allclose(right, left, atol=0.01)
+    assert "motions" not in KittiRawDataset(raw, lines, 96, 320)[0]
 
 
 def test_jpeg_draft_decodes_at_a_reduced_scale_only_where_it_serves(kitti_dir: Path, tmp_path: Path) -> None:

@@ -17,10 +17,12 @@ from posecons.data.kitti_raw import KittiRawDataset
 from posecons.data.oxts import oxts_to_poses, read_oxts
 from posecons.data.splits import build_split, read_split
 from posecons.data.synth import drive_folder, make_drive
+from posecons.data.synth.oracle import oracle_disparities
 from posecons.data.synth.render import camera_depth_at
 from posecons.data.synth.rig import Rig
 from posecons.data.trajectory_io import read_kitti_poses
 from posecons.errors import PoseconsError
+from posecons.geometry import invert_pose, mirror_pose, scale_intrinsics, warp
 
 W, H, FRAMES, SEED = 312, 96, 12, 3
 
@@ -167,19 +169,53 @@ def test_odometry_dataset(synth: Path) -> None:
     assert torch.equal(sample["frames"], raw["frames"])
 
 
-def test_distances_travelled_are_the_generators_true_ones(synth: Path, tmp_path: Path) -> None:
-    """Odometry: camera 0's true distance; raw: the INS unit's (they differ by the lever arm in turns).
-    A mirror image travels as far."""
+def test_motions_are_the_generators_true_camera_motions(synth: Path, tmp_path: Path) -> None:
+    """T_{f←0} = C_f⁻¹ C_0 of the split line's own camera (2 for l, 3 for r), from the odometry
+    poses and from the raw OXTS through the date's calibration; a mirror image gets M·T·M."""
     drive, rig, ids = make_drive(SEED, 1, FRAMES), Rig(W, H), (0, -2, 1)
-    cam0 = np.stack([drive.camera_pose(rig, i, 0) for i in range(FRAMES)])[:, :3, 3]
-    imu = drive.trajectory.imu_poses[:, :3, 3]
-    odom = KittiOdometryDataset(synth / "odometry", ["1 3 l"], H, W, frame_ids=ids, with_distances=True)
-    np.testing.assert_allclose(odom[0]["distances"].numpy(), np.linalg.norm(cam0[[1, 4]] - cam0[3], axis=1), rtol=1e-5)
-    raw = KittiRawDataset(synth, [f"{drive_folder(1)} 3 l"], H, W, frame_ids=ids, with_distances=True, flip_prob=1.0)
-    np.testing.assert_allclose(raw[0]["distances"].numpy(), np.linalg.norm(imu[[1, 4]] - imu[3], axis=1), rtol=1e-5)
+
+    def true_motion(cam: int) -> np.ndarray:
+        c = np.stack([drive.camera_pose(rig, i, cam) for i in range(FRAMES)])
+        return np.linalg.inv(c[[1, 4]]) @ c[3]
+
+    odom = KittiOdometryDataset(synth / "odometry", ["1 3 l", "1 3 r"], H, W, ids, train=False, with_motion=True)
+    np.testing.assert_allclose(odom[0]["motions"].numpy(), true_motion(2), atol=2e-5)
+    np.testing.assert_allclose(odom[1]["motions"].numpy(), true_motion(3), atol=2e-5)
+    raw = KittiRawDataset(synth, [f"{drive_folder(1)} 3 r"], H, W, frame_ids=ids, with_motion=True, flip_prob=1.0)
+    mirror = np.diag([-1.0, 1, 1, 1])
+    np.testing.assert_allclose(raw[0]["motions"].numpy(), mirror @ true_motion(3) @ mirror, atol=2e-5)
+    assert "motions" not in KittiRawDataset(synth, [f"{drive_folder(1)} 3 r"], H, W, frame_ids=ids)[0]
     (tmp_path / "sequences").symlink_to(synth / "odometry" / "sequences")
-    with pytest.raises(PoseconsError, match=r"poses/01.txt: odometry ground-truth poses not found .*velocity_weight"):
-        KittiOdometryDataset(tmp_path, ["1 3 l"], H, W, frame_ids=ids, with_distances=True)
+    with pytest.raises(PoseconsError, match=r"poses/01.txt: odometry ground-truth poses not found .*known_motion"):
+        KittiOdometryDataset(tmp_path, ["1 3 l"], H, W, frame_ids=ids, with_motion=True)
+
+
+@pytest.fixture(scope="module")
+def turning(make_synth) -> Path:
+    """Seed 1's first open drive turns by 2–5° a frame: a mirrored motion differs from the motion."""
+    return make_synth(2, FRAMES, 192, 64, 1, "--profile", "open", "--workers", "1")
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_motions_warp_the_exact_depth_onto_each_source(turning: Path, flip: bool) -> None:
+    """The renderer's depth of the target, warped with each sample motion, reproduces that source
+    frame (also in the mirrored sample); the inverse motion, or the unmirrored one, does not."""
+    line, h, w = f"{drive_folder(0)} 5 l", 64, 192
+    ds = KittiRawDataset(turning, [line], h, w, (0, -2, 1), with_motion=True, flip_prob=float(flip), jitter_prob=0)
+    sample = ds[0]
+    depth = torch.from_numpy(1 / oracle_disparities(turning, read_split([line]), h, w))[None]
+    depth = depth.flip(-1) if flip else depth
+    K = scale_intrinsics(sample["intrinsics"][None], h, w)
+    frames = sample["frames"]
+
+    def error(T: torch.Tensor, source: int) -> float:
+        return (warp(frames[source][None], depth, T[None], K) - frames[0]).abs()[..., 4:-4, 4:-4].mean().item()
+
+    for i, T in enumerate(sample["motions"]):
+        assert np.degrees(np.arccos((T[:3, :3].trace().item() - 1) / 2)) > 2  # the premise: it turns
+        right = error(T, i + 1)
+        assert right < 0.5 * error(invert_pose(T[None])[0], i + 1)
+        assert right < 0.5 * error(mirror_pose(T), i + 1)
 
 
 def test_build_split_on_synth(synth: Path) -> None:

@@ -139,11 +139,44 @@ def test_pose_conventions_with_true_motion(n):
     assert good["photometric"] < 0.3 * flipped["photometric"]  # the right direction explains the motion
 
 
+def motions_of(world: dict, frame_ids, b: int = 2) -> torch.Tensor:
+    """(b, S, 4, 4) float32 batch['motions']: T_{f←0} = G_f⁻¹·G_0 for each source f."""
+    return torch.stack([torch.linalg.inv(world[f]) @ world[0] for f in frame_ids[1:]]).float().expand(b, -1, -1, -1)
+
+
+class NoPoseNet(nn.Module):
+    def forward(self, *args, **kwargs):
+        raise AssertionError("the pose net ran")
+
+
+def test_known_motion_warps_with_the_batch_motions_and_never_runs_the_pose_net():
+    """The sliding scene at its true depth: the batch's true motions explain it exactly as a pose
+    net returning the true motion does; the same motions given to the other source do not."""
+    z, fx_norm, frame_ids = 10.0, 0.5, [0, -1, 1]
+    frames = sliding_scene(2, frame_ids)
+    K = torch.tensor([[fx_norm, 0, 0.5], [0, fx_norm * W / H, 0.5], [0, 0, 1]]).expand(2, 3, 3).clone()
+    world = world_poses(frame_ids, step=(2 * z / (fx_norm * W), 0, 0))
+    depth = ConstantDepth((1 / z - 1 / 100.0) / (1 / 0.1 - 1 / 100.0))
+    learnt = PoseConsModel(make_config(**{"loss.automask": "false"}))
+    learnt.depth_net, learnt.pose_net = depth, TrajectoryPoseNet(frames, frame_ids, world)
+    known = PoseConsModel(make_config(**{"loss.automask": "false", "model.known_motion": "true"}))
+    known.depth_net, known.pose_net = depth, NoPoseNet()
+    motions = motions_of(world, frame_ids)
+    outputs, losses = known({"frames": frames, "intrinsics": K, "motions": motions})
+    reference = learnt({"frames": frames, "intrinsics": K})[1]
+    assert losses["photometric"].item() == pytest.approx(reference["photometric"].item(), abs=1e-6)
+    assert torch.equal(outputs["poses"][1], motions[:, 1])
+    swapped = known({"frames": frames, "intrinsics": K, "motions": motions[:, [1, 0]]})[1]
+    assert losses["photometric"] < 0.3 * swapped["photometric"]
+    with pytest.raises(ValueError, match="motions"):
+        known({"frames": frames, "intrinsics": K})
+
+
 @pytest.mark.parametrize("layout", ["right", "sources_swapped", "samples_transposed"])
 def test_velocity_loss_pairs_each_source_distance_with_its_own_pose(layout):
-    """True motion v per frame, sources −1 and +2: the translations are v and 2v long. Distances in
-    the batch's (sample, source) layout, in any unit, give zero; swapping the sources or reading the
-    (B, S) tensor in the other order does not."""
+    """True motion v per frame, sources −1 and +2: the translations are v and 2v long. The batch's
+    motions of those lengths (in any unit, any direction) give zero; swapping the sources or reading
+    the (B, S) layout in the other order does not."""
     frame_ids, v = [0, -1, 2], 0.3
     frames = sliding_scene(2, frame_ids)
     model = PoseConsModel(make_config(**{"model.frame_ids": "[0,-1,2]", "loss.velocity_weight": 0.5}))
@@ -153,14 +186,16 @@ def test_velocity_loss_pairs_each_source_distance_with_its_own_pose(layout):
         "sources_swapped": [[2.0, 1.0], [2.0, 1.0]],
         "samples_transposed": [[1.0, 1.0], [2.0, 2.0]],
     }[layout]
-    batch = {"frames": frames, "intrinsics": random_batch()["intrinsics"], "distances": torch.tensor(d)}
+    motions = torch.eye(4).repeat(2, 2, 1, 1)
+    motions[..., :3, 3] = torch.tensor(d)[..., None] * torch.tensor([0.6, 0.0, -0.8])
+    batch = {"frames": frames, "intrinsics": random_batch()["intrinsics"], "motions": motions}
     _, losses = model(batch)
     # lengths (v, v, 2v, 2v) source-major, ŝ = v: mean |error| over the mean length 1.5v
     expected = {"right": 0.0, "sources_swapped": 1.0 / 1.5, "samples_transposed": 0.5 / 1.5}[layout]
     assert losses["velocity"].item() == pytest.approx(expected, abs=1e-5)
     rest = losses["photometric"] + losses["smoothness"]
     assert losses["total"].item() == pytest.approx((rest + 0.5 * losses["velocity"]).item(), rel=1e-6)
-    with pytest.raises(ValueError, match="distances"):
+    with pytest.raises(ValueError, match="motions"):
         model({"frames": frames, "intrinsics": batch["intrinsics"]})
 
 

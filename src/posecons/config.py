@@ -132,6 +132,10 @@ class ModelConfig:
     # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
     # mirror-equivariant by construction (sideways motion, yaw and roll cannot hold a constant bias)
     pose_mirror: bool = False
+    # Warp with the data set's true camera motion (raw: oxts/ through the date's calibration files;
+    # odometry: poses/NN.txt) instead of the pose net's. Not self-supervised: the depth learns metres
+    # (set min/max_depth in metres) and the pose net is not trained, so no pose-net loss may be on
+    known_motion: bool = False
 
 
 @dataclass
@@ -247,6 +251,11 @@ class Config:
             )
         if min(m.height, m.width) < 64:  # the 1/32-size features must be ≥ 2 pixels for their reflection padding
             raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
+        if m.known_motion and (lo.constraints or lo.skip_weight > 0 or lo.velocity_weight > 0):
+            raise PoseconsError(
+                "model.known_motion=true leaves the pose net untrained: set loss.constraints=[], "
+                "loss.skip_weight=0 and loss.velocity_weight=0"
+            )
         if "cyc" in lo.constraints and not (min(m.frame_ids) < 0 < max(m.frame_ids)):
             raise PoseconsError(
                 "the cyc constraint needs model.frame_ids to hold a past and a future frame, "

@@ -138,6 +138,13 @@ def flip_intrinsics(K_norm: torch.Tensor, width: int) -> torch.Tensor:
     return flipped
 
 
+def mirror_pose(T: torch.Tensor) -> torch.Tensor:
+    """T (..., 4, 4) seen in the horizontally mirrored image (x ↦ −x): M·T·M with M = diag(−1, 1, 1, 1),
+    which negates the entries of row 0 and of column 0 except the one they share."""
+    m = T.new_tensor([-1.0, 1.0, 1.0, 1.0])
+    return T * m[:, None] * m
+
+
 def pixel_grid(height: int, width: int, like: torch.Tensor) -> torch.Tensor:
     """Homogeneous pixel coordinates (3, H·W): rows u, v, 1 (u along the width)."""
     v, u = torch.meshgrid(
@@ -216,6 +223,7 @@ __all__ = [
     "flip_intrinsics",
     "invert_pose",
     "make_pose",
+    "mirror_pose",
     "pixel_grid",
     "pixels_to_grid",
     "pose_distance",

@@ -8,7 +8,8 @@ Batch keys (see ``posecons.data``):
     intrinsics  (B, 3, 3) normalised K (row 0 / W, row 1 / H)
     net_frames  (B, F, 3, H, W) optional: what the networks see, e.g. colour-jittered by
                 :func:`posecons.data.augment.jitter_batch`; the losses always use ``frames`` (SPEC §6)
-    distances   (B, F − 1) metres travelled from the target to each source: needed by loss.velocity_weight
+    motions     (B, F − 1, 4, 4) the camera's true motion T_{f←0} to each source, in metres: needed by
+                model.known_motion (which warps with it) and loss.velocity_weight (its lengths)
 """
 
 from __future__ import annotations
@@ -162,17 +163,27 @@ class PoseConsModel(nn.Module):
         else:
             disps = self.depth_net(net_frames[:, 0])
 
+        sources = m.frame_ids[1:]
+        motions = None
+        if m.known_motion or lo.velocity_weight > 0:
+            if "motions" not in batch:
+                raise ValueError("model.known_motion and loss.velocity_weight need batch['motions'] (T_{f←0})")
+            motions = check_tensor("batch['motions']", batch["motions"], (frames.shape[0], len(sources), 4, 4))
+            motions = motions.float()
         # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group.
         constraints = self.active_constraints(step) if with_constraints else []
-        pairs = self.pose_pairs(constraints)
-        a = torch.cat([net_frames[:, index[i]] for i, _ in pairs])
-        b = torch.cat([net_frames[:, index[j]] for _, j in pairs])
-        sizes = [frames.shape[0]] * len(pairs)
-        P = PairPoses(pairs, sizes, *self.pose_net(a, b, groups=sizes, tracked=len(m.frame_ids) - 1))
+        if not m.known_motion:
+            pairs = self.pose_pairs(constraints)
+            a = torch.cat([net_frames[:, index[i]] for i, _ in pairs])
+            b = torch.cat([net_frames[:, index[j]] for _, j in pairs])
+            sizes = [frames.shape[0]] * len(pairs)
+            P = PairPoses(pairs, sizes, *self.pose_net(a, b, groups=sizes, tracked=len(m.frame_ids) - 1))
 
         with torch.autocast(frames.device.type, enabled=False):
-            sources = m.frame_ids[1:]
-            poses = {f: P.T(f, 0, input=temporal(f)) for f in sources}  # T_{f←0}, for warping
+            if m.known_motion:
+                poses = {f: motions[:, i] for i, f in enumerate(sources)}
+            else:
+                poses = {f: P.T(f, 0, input=temporal(f)) for f in sources}  # T_{f←0}, for warping
             dc, masks = None, None
             if lo.depth_consistency_weight > 0:
                 dc, masks = self._depth_consistency(disps[0], source_disp, K, poses)
@@ -201,9 +212,7 @@ class PoseConsModel(nn.Module):
                 losses["skip"] = self._skip_synthesis(frames.float(), K, source_disp, P.T(nxt, prev, input=(prev, nxt)))
                 terms.append("skip")
             if lo.velocity_weight > 0:  # each source pair's translation against the measured distance
-                if "distances" not in batch:
-                    raise ValueError("loss.velocity_weight > 0 needs batch['distances'] (metres to each source)")
-                d = check_tensor("batch['distances']", batch["distances"], (frames.shape[0], len(sources))).float()
+                d = motions[..., :3, 3].norm(dim=-1)  # (B, S) metres to each source
                 losses["velocity"] = velocity_loss(
                     torch.cat([P.vector(*temporal(f))[1] for f in sources]), d.t().reshape(-1)
                 )

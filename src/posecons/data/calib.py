@@ -170,6 +170,23 @@ def velo_to_image(date_dir: Path, cam: int = 2) -> np.ndarray:
     return p_rect @ r_rect @ rigid(read_calib_file(velo_file), velo_file)
 
 
+def rectified_offset(p_rect: np.ndarray) -> np.ndarray:
+    """(4, 4) rectified camera 0 → the rectified camera of projection ``p_rect`` = K [I | t]: a shift by t."""
+    out = np.eye(4)
+    out[:3, 3] = np.linalg.solve(p_rect[:, :3], p_rect[:, 3])
+    return out
+
+
+def imu_to_camera(date_dir: Path, cam: int = 2) -> np.ndarray:
+    """(4, 4) GNSS/INS unit → rectified camera ``cam``: offset · R_rect_00 · [R|T]_velo→cam · [R|T]_imu→velo."""
+    date_dir = Path(date_dir)
+    r_rect = np.eye(4)
+    r_rect[:3, :3] = calib_matrix(cam_to_cam(date_dir), "R_rect_00", (3, 3), date_dir / "calib_cam_to_cam.txt")
+    velo, imu = date_dir / "calib_velo_to_cam.txt", date_dir / "calib_imu_to_velo.txt"
+    velo_to_cam, imu_to_velo = rigid(read_calib_file(velo), velo), rigid(read_calib_file(imu), imu)
+    return rectified_offset(raw_projection(date_dir, cam)[0]) @ r_rect @ velo_to_cam @ imu_to_velo
+
+
 def format_calib(entries: dict, calib_time: str | None = "01-Jan-2020 00:00:00") -> str:
     """KITTI calibration text: optional ``calib_time`` then ``key: v v v`` lines (%e numbers)."""
     lines = [f"calib_time: {calib_time}"] if calib_time else []

@@ -5,8 +5,9 @@ Sample contract (the model relies on it):
     ``intrinsics`` float32 (3, 3) K normalised by image size, mirrored when flipped (``flip_intrinsics``);
     ``color_aug``  float32 (4,) jitter factors (b, c, s, h), (1, 1, 1, 0) when not drawn;
     ``index`` int, ``folder`` str, ``frame`` int, ``side`` str;
-    ``distances``  float32 (F − 1,) with ``with_distances``: metres travelled between the target and
-                   each source, from the drive's GNSS/INS (raw) or ground-truth poses (odometry).
+    ``motions``    float32 (F − 1, 4, 4) with ``with_motion``: the camera's true motion T_{f←0} (metres)
+                   from the target to each source, from the drive's GNSS/INS (raw) or ground-truth
+                   poses (odometry), mirrored (M·T·M, M = diag(−1, 1, 1, 1)) when flipped.
 
 With a frame cache (:mod:`.cache`) the resized pixels come from it instead of the image files;
 everything else, and every value of the sample, is the same.
@@ -24,7 +25,7 @@ from PIL import Image
 from torch.utils.data import Dataset, DistributedSampler, Sampler
 
 from ..errors import PoseconsError
-from ..geometry import flip_intrinsics
+from ..geometry import flip_intrinsics, mirror_pose
 from .augment import IDENTITY_JITTER, draw_augmentation, sample_rng
 from .cache import FrameCache
 from .calib import KITTI_FIXED_K
@@ -80,7 +81,7 @@ class FrameDataset(Dataset):
         skip_incomplete: bool = False,
         cache: FrameCache | None = None,
         jpeg_draft: bool = False,
-        with_distances: bool = False,
+        with_motion: bool = False,
     ) -> None:
         self.data_path = Path(data_path)
         self.lines: list[SplitLine] = read_split(split)
@@ -96,8 +97,8 @@ class FrameDataset(Dataset):
         self.jpeg_draft = jpeg_draft
         if check_files:
             self.check_files()
-        # Read once here (each line's position files), not again for every sample of every epoch.
-        self.distances = [self.travelled(line) for line in self.lines] if with_distances else None
+        # Read once here (each line's pose files), not again for every sample of every epoch.
+        self.motions = [self.motion(line) for line in self.lines] if with_motion else None
         self._first = {(line.folder, line.side): line for line in reversed(self.lines)}  # first line per camera
         self._sizes: dict[tuple[str, str], tuple[Path, tuple[int, int]]] = {}
 
@@ -110,18 +111,21 @@ class FrameDataset(Dataset):
         """Normalised (3, 3) K of ``line``'s camera from its calibration file."""
         raise NotImplementedError
 
-    def positions(self, line: SplitLine, frames: list[int]) -> np.ndarray:
-        """Metric positions (N, 3) of ``line``'s camera rig at ``frames``, in any one world frame."""
+    def camera_poses(self, line: SplitLine, frames: list[int]) -> np.ndarray:
+        """Metric poses (N, 4, 4) of ``line``'s camera at ``frames`` (camera → one world frame)."""
         raise NotImplementedError
 
     # -- shared logic -------------------------------------------------------------------------
-    def travelled(self, line: SplitLine) -> np.ndarray:
-        """float32 (F − 1,): metres from ``line``'s target frame to each source (a mirror image keeps them)."""
+    def motion(self, line: SplitLine) -> np.ndarray:
+        """float32 (F − 1, 4, 4): the camera's motion T_{f←0} = C_f⁻¹ C_0 from ``line``'s target
+        frame to each source, which maps target-camera points into the source camera."""
         try:
-            p = self.positions(line, [line.frame + f for f in self.frame_ids])
+            c = self.camera_poses(line, [line.frame + f for f in self.frame_ids])
         except PoseconsError as exc:
-            raise PoseconsError(f"{exc} (loss.velocity_weight needs the distance travelled)") from exc
-        return np.linalg.norm(p[1:] - p[0], axis=-1).astype(np.float32)
+            raise PoseconsError(
+                f"{exc} (loss.velocity_weight and model.known_motion need the camera's motion)"
+            ) from exc
+        return (np.linalg.inv(c[1:]) @ c[0]).astype(np.float32)
 
     def check_files(self) -> None:
         """Fail early, naming the split line, when a frame or its neighbours are missing; with
@@ -203,7 +207,10 @@ class FrameDataset(Dataset):
             [self.load_frame(self.image_path(line, line.frame + f), flip, like) for f in self.frame_ids]
         )
         k = torch.from_numpy(self.intrinsics(line).astype(np.float32))
-        extra = {} if self.distances is None else {"distances": torch.from_numpy(self.distances[index])}
+        extra = {}
+        if self.motions is not None:
+            motion = torch.from_numpy(self.motions[index])
+            extra["motions"] = mirror_pose(motion) if flip else motion
         return {
             "frames": frames,
             "intrinsics": flip_intrinsics(k, self.width) if flip else k,

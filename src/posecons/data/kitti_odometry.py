@@ -10,7 +10,7 @@ from PIL import Image
 
 from ..errors import PoseconsError
 from ..fileio import require_file
-from .calib import calib_matrix, pixel_to_normalised, read_calib_file
+from .calib import calib_matrix, pixel_to_normalised, read_calib_file, rectified_offset
 from .frames import FrameDataset
 from .splits import SIDE_TO_CAMERA, SplitLine
 from .trajectory_io import read_kitti_poses
@@ -67,20 +67,23 @@ class KittiOdometryDataset(FrameDataset):
             self._k_cache[key] = pixel_to_normalised(P, height, width).astype(np.float32)
         return self._k_cache[key]
 
-    def positions(self, line: SplitLine, frames: list[int]) -> np.ndarray:
-        """Camera 0's positions from the ground-truth ``<data_path>/poses/<NN>.txt`` (read once a sequence)."""
+    def camera_poses(self, line: SplitLine, frames: list[int]) -> np.ndarray:
+        """Camera 0's ground-truth poses from ``<data_path>/poses/<NN>.txt`` (read once a sequence),
+        carried to ``line``'s camera by its offset in ``calib.txt``."""
         sequence = int(line.folder)
-        if sequence not in self._positions:
+        if sequence not in self._poses:
             path = require_file(Path(self.data_path) / "poses" / f"{sequence:02d}.txt", "odometry ground-truth poses")
-            self._positions[sequence] = read_kitti_poses(path)[:, :3, 3]
-        known = self._positions[sequence]
+            self._poses[sequence] = read_kitti_poses(path)
+        known = self._poses[sequence]
         if max(frames) >= len(known):
             raise PoseconsError(f"{self.data_path}/poses/{sequence:02d}.txt: no pose for frame {max(frames)}")
-        return known[list(frames)]
+        calib = sequence_dir(self.data_path, line.folder) / "calib.txt"
+        offset = rectified_offset(read_odometry_projection(calib, SIDE_TO_CAMERA[line.side]))
+        return known[list(frames)] @ np.linalg.inv(offset)
 
     def __init__(self, *args, **kwargs) -> None:
         self._k_cache: dict[tuple[int, str], np.ndarray] = {}
-        self._positions: dict[int, np.ndarray] = {}
+        self._poses: dict[int, np.ndarray] = {}
         super().__init__(*args, **kwargs)
 
     def check_files(self) -> None:

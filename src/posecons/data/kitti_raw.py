@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PoseconsError
-from .calib import raw_intrinsics
+from .calib import imu_to_camera, raw_intrinsics
 from .frames import FrameDataset
 from .oxts import oxts_to_poses, read_oxts
 from .splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
@@ -48,8 +48,10 @@ class KittiRawDataset(FrameDataset):
         date = line.folder.split("/")[0]
         return raw_intrinsics(self.data_path / date, SIDE_TO_CAMERA[line.side])
 
-    def positions(self, line: SplitLine, frames: list[int]) -> np.ndarray:
-        """The GNSS/INS unit's positions from ``<folder>/oxts/data/<frame:010d>.txt`` (the camera's
-        displacement differs from it only by the lever arm turned through the frames' rotation)."""
+    def camera_poses(self, line: SplitLine, frames: list[int]) -> np.ndarray:
+        """The GNSS/INS unit's poses from ``<folder>/oxts/data/<frame:010d>.txt`` carried to the
+        camera through the date's ``calib_imu_to_velo``, ``calib_velo_to_cam`` and ``calib_cam_to_cam``."""
         folder = self.data_path / line.folder / "oxts" / "data"
-        return oxts_to_poses(read_oxts([folder / f"{f:010d}.txt" for f in frames]))[:, :3, 3]
+        imu = oxts_to_poses(read_oxts([folder / f"{f:010d}.txt" for f in frames]))
+        date_dir = self.data_path / line.folder.split("/")[0]
+        return imu @ np.linalg.inv(imu_to_camera(date_dir, SIDE_TO_CAMERA[line.side]))

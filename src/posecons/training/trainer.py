@@ -119,7 +119,11 @@ class Trainer:
         )
         self.weights = f"EMA (decay {t.ema_decay:g})" if t.ema_decay > 0 else "raw"  # what checkpoints hold
         self.ddp = (
-            DistributedDataParallel(model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
+            DistributedDataParallel(
+                model,
+                device_ids=[self.device.index] if self.device.type == "cuda" else None,
+                find_unused_parameters=config.model.known_motion,  # the pose net then has no gradient
+            )
             if self.env.world > 1
             else model
         )

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..calib import calib_matrix, read_calib_file, rigid
+from ..calib import calib_matrix, read_calib_file, rectified_offset, rigid
 
 KITTI_SIZE = (1242, 375)
 CALIB = Path(__file__).resolve().parent / "calib_2011_09_26"  # the values, in KITTI's calibration files
@@ -56,10 +56,7 @@ class Rig:
 
     def m_cam_rect0(self, cam: int) -> np.ndarray:
         """Rectified camera 0 → rectified camera ``cam``: the offset t with P_rect = K [I | t]."""
-        p = self.p_rect(cam)
-        out = np.eye(4)
-        out[:3, 3] = np.linalg.solve(p[:, :3], p[:, 3])
-        return out
+        return rectified_offset(self.p_rect(cam))
 
     def m_cam_imu(self, cam: int) -> np.ndarray:
         """IMU → rectified camera ``cam`` (cam 0 is the odometry pose frame)."""
