@@ -71,6 +71,12 @@ def test_known_motion_refuses_every_loss_that_trains_the_pose_net(extra):
     assert load_config(overrides=[extra]).model.known_motion is False
     with pytest.raises(PoseconsError, match=r"^model.known_motion=true leaves the pose net untrained"):
         load_config(overrides=["model.known_motion=true", extra])
+    load_config(overrides=["model.known_rotation=true", extra])  # the pose net still gives the translation
+
+
+def test_known_motion_already_holds_the_rotation():
+    with pytest.raises(PoseconsError, match="already warps with the true rotation"):
+        load_config(overrides=["model.known_motion=true", "model.known_rotation=true"])
 
 
 @pytest.mark.parametrize(

@@ -172,6 +172,24 @@ def test_known_motion_warps_with_the_batch_motions_and_never_runs_the_pose_net()
         known({"frames": frames, "intrinsics": K})
 
 
+def test_known_rotation_warps_with_the_batch_rotation_and_the_pose_nets_translation():
+    frame_ids = [0, -1, 1]
+    frames = sliding_scene(2, frame_ids)
+    K = random_batch()["intrinsics"]
+    net = TrajectoryPoseNet(frames, frame_ids, world_poses(frame_ids, 0.05, step=(0.3, 0, 0)))
+    learnt = PoseConsModel(make_config())
+    known = copy.deepcopy(learnt)
+    known.config = make_config(**{"model.known_rotation": "true"})
+    learnt.pose_net = known.pose_net = net
+    motions = motions_of(world_poses(frame_ids, 0.1, step=(0, 0, 1.0), seed=1), frame_ids)
+    net_poses = learnt({"frames": frames, "intrinsics": K})[0]["poses"]
+    poses = known({"frames": frames, "intrinsics": K, "motions": motions})[0]["poses"]
+    for i, f in enumerate(frame_ids[1:]):
+        torch.testing.assert_close(poses[f][:, :3, :3], motions[:, i, :3, :3])
+        torch.testing.assert_close(poses[f][:, :3, 3], net_poses[f][:, :3, 3])
+        assert not torch.allclose(poses[f][:, :3, :3], net_poses[f][:, :3, :3], atol=1e-3)
+
+
 @pytest.mark.parametrize("layout", ["right", "sources_swapped", "samples_transposed"])
 def test_velocity_loss_pairs_each_source_distance_with_its_own_pose(layout):
     """True motion v per frame, sources −1 and +2: the translations are v and 2v long. The batch's

@@ -136,6 +136,9 @@ class ModelConfig:
     # odometry: poses/NN.txt) instead of the pose net's. Not self-supervised: the depth learns metres
     # (set min/max_depth in metres) and the pose net is not trained, so no pose-net loss may be on
     known_motion: bool = False
+    # Warp with the data set's rotation (what a rig's gyro measures) and the pose net's translation: the
+    # rotation of each T_{f←0} replaced by the true one's (the same files as known_motion)
+    known_rotation: bool = False
 
 
 @dataclass
@@ -255,6 +258,10 @@ class Config:
             raise PoseconsError(
                 "model.known_motion=true leaves the pose net untrained: set loss.constraints=[], "
                 "loss.skip_weight=0 and loss.velocity_weight=0"
+            )
+        if m.known_motion and m.known_rotation:
+            raise PoseconsError(
+                "model.known_motion=true already warps with the true rotation: leave model.known_rotation false"
             )
         if "cyc" in lo.constraints and not (min(m.frame_ids) < 0 < max(m.frame_ids)):
             raise PoseconsError(

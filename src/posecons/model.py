@@ -22,7 +22,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from .config import Config
-from .geometry import check_tensor, disp_to_depth, invert_pose, pose_vec_to_mat, scale_intrinsics, warp
+from .geometry import check_tensor, disp_to_depth, invert_pose, make_pose, pose_vec_to_mat, scale_intrinsics, warp
 from .losses import (
     cycle_loss,
     depth_consistency_loss,
@@ -165,9 +165,11 @@ class PoseConsModel(nn.Module):
 
         sources = m.frame_ids[1:]
         motions = None
-        if m.known_motion or lo.velocity_weight > 0:
+        if m.known_motion or m.known_rotation or lo.velocity_weight > 0:
             if "motions" not in batch:
-                raise ValueError("model.known_motion and loss.velocity_weight need batch['motions'] (T_{f←0})")
+                raise ValueError(
+                    "model.known_motion, known_rotation and loss.velocity_weight need batch['motions'] (T_{f←0})"
+                )
             motions = check_tensor("batch['motions']", batch["motions"], (frames.shape[0], len(sources), 4, 4))
             motions = motions.float()
         # Every pose-net input of this step in one batched pass, BatchNorm statistics per pair group.
@@ -184,6 +186,8 @@ class PoseConsModel(nn.Module):
                 poses = {f: motions[:, i] for i, f in enumerate(sources)}
             else:
                 poses = {f: P.T(f, 0, input=temporal(f)) for f in sources}  # T_{f←0}, for warping
+            if m.known_rotation:  # the data's rotation, the pose net's translation
+                poses = {f: make_pose(motions[:, i, :3, :3], poses[f][:, :3, 3]) for i, f in enumerate(sources)}
             dc, masks = None, None
             if lo.depth_consistency_weight > 0:
                 dc, masks = self._depth_consistency(disps[0], source_disp, K, poses)
@@ -191,7 +195,7 @@ class PoseConsModel(nn.Module):
             # The paper's constraints (SPEC §5), each in the reading order of its equation.
             if "fb" in constraints:  # d(T_{f←0}, inverse(T_{0←f} from the reversed pair)) for each source
                 losses["fb"] = forward_backward_loss(
-                    torch.cat([poses[f] for f in sources]),
+                    torch.cat([P.T(f, 0, input=temporal(f)) for f in sources]),
                     torch.cat([P.T(0, f, input=temporal(f)[::-1]) for f in sources]),
                 )
             if "id" in constraints:  # ‖e‖₁ + ‖t‖₁ of pose(I_0, I_0)

@@ -55,5 +55,5 @@ def build_dataset(config: Config, data_path: str | Path, split_file: Path, train
         skip_incomplete=d.skip_incomplete,
         cache=cache,
         jpeg_draft=d.jpeg_draft,
-        with_motion=config.loss.velocity_weight > 0 or m.known_motion,
+        with_motion=config.loss.velocity_weight > 0 or m.known_motion or m.known_rotation,
     )
