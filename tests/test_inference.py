@@ -14,7 +14,7 @@ import pytest
 import torch
 from PIL import Image
 
-from posecons.checkpoint import load_model, save_checkpoint
+from posecons.checkpoint import load_checkpoint, load_model, save_checkpoint
 from posecons.cli import main
 from posecons.config import PRESETS, load_config
 from posecons.data.calib import normalised_to_pixel, read_calib_intrinsics
@@ -519,6 +519,28 @@ def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, bas
     with pytest.raises(Exception, match="differs from PyTorch"):  # a tolerance nothing meets fails the export
         export_model(ckpt, tmp_path / "strict", tolerance=-1.0)
     assert _leftovers(tmp_path / "strict") == []
+
+
+def test_a_known_motion_model_predicts_metres_and_no_motion(ckpt, frames_dir, tmp_path, capsys):
+    """Its pose net was never trained: predict says the depth is metric (scale 1), writes no
+    trajectory and refuses --stabilise; export leaves the pose graph out and says metres, and
+    predict from that export says metric too."""
+    state = load_checkpoint(ckpt)
+    state["config"]["model"]["known_motion"] = True
+    metric = tmp_path / "metric.pt"
+    save_checkpoint(metric, state)
+    info = export_model(metric, tmp_path / "export")
+    assert set(info["files"]) == {"depth", "weights"} and "metres" in info["outputs"]["depth"]
+    assert not (tmp_path / "export" / "pose.onnx").exists()
+    for model in (metric, tmp_path / "export" / "depth.onnx"):
+        out = tmp_path / f"out_{model.stem}"
+        assert (
+            main(["predict", "--checkpoint", str(model), "--input", str(frames_dir), "--out", str(out), "--quiet"]) == 0
+        )
+        assert json.loads((out / "scale.json").read_text())["method"] == "metric"
+        assert not (out / "trajectory_kitti.txt").exists()
+    stabilise = ["predict", "--checkpoint", str(metric), "--input", str(frames_dir), "--stabilise"]
+    _fails(stabilise, tmp_path / "stab", capsys, "no trained pose network")
 
 
 def test_export_of_a_mirrored_pose_net_matches_pytorch_at_batch_1_and_2(tmp_path):

@@ -33,6 +33,7 @@ class Predictor:
     height: int
     width: int
     has_pose: bool
+    metric: bool = False  # depth in metres: trained with the true camera motion (model.known_motion)
 
     def disparity(self, images: np.ndarray) -> torch.Tensor:
         """→ scaled disparity (B, 1, height, width) at full scale (depth = 1 / disparity)."""
@@ -50,7 +51,8 @@ class TorchPredictor(Predictor):
         self.device = torch.device(device)
         self.model, self.config, self.name = model, model.config, name
         self.height, self.width = self.config.model.height, self.config.model.width
-        self.has_pose = True
+        self.metric = self.config.model.known_motion
+        self.has_pose = not self.metric  # a known_motion run never trains its pose net
 
     @torch.no_grad()
     def disparity(self, images: np.ndarray) -> torch.Tensor:
@@ -72,6 +74,7 @@ class OnnxPredictor(Predictor):
         try:
             info = json.loads(info_path.read_text())
             self.height, self.width = int(info["height"]), int(info["width"])
+            self.metric = bool(info.get("config", {}).get("model", {}).get("known_motion", False))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise PoseconsError(
                 f"{info_path}: missing or unreadable export description ({exc}); "

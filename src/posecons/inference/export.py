@@ -79,8 +79,15 @@ def _max_diff(graph: nn.Module, path: Path, inputs: dict[str, torch.Tensor]) -> 
     return {n: float(np.abs(g - w.numpy()).max()) for n, g, w in zip(names, got, want)}
 
 
+OUTPUTS = {
+    "depth": "disparity (B,1,H,W): scaled disparity, depth = 1/disparity",
+    "pose": "pose (B,6) axis-angle+translation; matrix (B,4,4) T_{b<-a}",
+}
+METRES = " (metres: trained with the true motion)"
+
+
 def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-4, batch: int = 2) -> dict:
-    """Write depth.onnx, pose.onnx, weights.safetensors and export.json into ``out``.
+    """Write depth.onnx, pose.onnx (not for a model.known_motion run), weights.safetensors and export.json into ``out``.
 
     The ONNX graphs are traced with batch 1 and verified with ``batch`` random frames (so the
     dynamic batch axis is exercised); a difference above ``tolerance`` raises PoseconsError and
@@ -90,14 +97,16 @@ def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-
     h, w = config.model.height, config.model.width
     generator = torch.Generator().manual_seed(0)
     sample = torch.rand(3, batch, 3, h, w, generator=generator)
-    depth, pose = DepthGraph(model), PoseGraph(model)
+    # A known_motion run never trains its pose net, and its depth is in metres.
+    metric = config.model.known_motion
+    graphs = {"depth": (DepthGraph(model), DEPTH_ONNX, {"images": sample[0]}, ["disparity"])}
+    if not metric:
+        graphs["pose"] = (PoseGraph(model), POSE_ONNX, {"image_a": sample[1], "image_b": sample[2]}, ["pose", "matrix"])
     with output_dir(out) as tmp:
-        _export(depth, (sample[0, :1],), tmp / DEPTH_ONNX, ["images"], ["disparity"])
-        _export(pose, (sample[1, :1], sample[2, :1]), tmp / POSE_ONNX, ["image_a", "image_b"], ["pose", "matrix"])
-        diffs = {
-            "depth": _max_diff(depth, tmp / DEPTH_ONNX, {"images": sample[0]}),
-            "pose": _max_diff(pose, tmp / POSE_ONNX, {"image_a": sample[1], "image_b": sample[2]}),
-        }
+        diffs = {}
+        for name, (graph, file, inputs, outputs) in graphs.items():
+            _export(graph, tuple(x[:1] for x in inputs.values()), tmp / file, list(inputs), outputs)
+            diffs[name] = _max_diff(graph, tmp / file, inputs)
         worst = max(v for d in diffs.values() for v in d.values())
         if not worst <= tolerance:  # also catches NaN
             raise PoseconsError(
@@ -114,11 +123,8 @@ def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-
             "batch_verified": batch,
             "tolerance": tolerance,
             "max_abs_diff": diffs,
-            "files": {"depth": DEPTH_ONNX, "pose": POSE_ONNX, "weights": WEIGHTS},
-            "outputs": {
-                "depth": "disparity (B,1,H,W): scaled disparity, depth = 1/disparity",
-                "pose": "pose (B,6) axis-angle+translation; matrix (B,4,4) T_{b<-a}",
-            },
+            "files": {**{name: g[1] for name, g in graphs.items()}, "weights": WEIGHTS},
+            "outputs": {name: OUTPUTS[name] + (METRES if name == "depth" and metric else "") for name in graphs},
             "config": config.to_dict(),
         }
         (tmp / EXPORT_INFO).write_text(json.dumps(info, indent=2))

@@ -104,7 +104,7 @@ def calibrate(
     if options.scale is not None:
         return scaling.ScaleResult("given", float(options.scale))
     if gt is None and options.camera_height is None:
-        return scaling.ScaleResult("none", 1.0)
+        return scaling.ScaleResult("metric" if predictor.metric else "none", 1.0)
     names, scales = [], []
     for frames, _, disps in predict_batches(predictor, source, options.batch_size):
         for frame, disp in zip(frames, disps):
@@ -159,7 +159,7 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
     gt = GroundTruth(options.calibrate_gt) if options.calibrate_gt else None
     do_pose = options.trajectory and predictor.has_pose
     if options.stabilise and not predictor.has_pose:
-        raise PoseconsError(f"{predictor.name}: no pose network, so no stabilising (drop --stabilise)")
+        raise PoseconsError(f"{predictor.name}: no trained pose network, so no stabilising (drop --stabilise)")
     start = time.perf_counter()
     result = calibrate(source, predictor, options, K_norm, gt)
     s = result.value

@@ -69,7 +69,7 @@ def camera_height(depth: np.ndarray, K: np.ndarray) -> float:
 class ScaleResult:
     """The sequence's scale and how it was found (written to scale.json)."""
 
-    method: str  # "none", "given", "ground_truth" or "camera_height"
+    method: str  # "none", "metric" (a known_motion model's own metres), "given", "ground_truth" or "camera_height"
     value: float
     frames: list[str] = field(default_factory=list)  # frames used for calibration
     per_frame: list[float] = field(default_factory=list)  # their individual scales
