@@ -49,6 +49,7 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("train.lr_decay_epochs=[0]", "train.lr_decay_epochs must be epochs ≥ 1"),
         ("model.scales=[0,4]", "model.scales must be distinct scales from 0–3"),
         ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
+        ("model.pose_rotation_scale=0", "model.pose_rotation_scale must be > 0"),
         ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.ema_decay=-0.1", r"^train.ema_decay must be in \[0, 1\), got -0.1$"),

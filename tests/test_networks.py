@@ -5,8 +5,10 @@ import torch
 import torchvision.models as tvm
 
 from posecons import networks
+from posecons.config import load_config
 from posecons.errors import PoseconsError
 from posecons.geometry import pose_vec_to_mat
+from posecons.model import PoseConsModel
 from posecons.networks import DepthNet, PoseNet, ResnetEncoder
 
 
@@ -115,15 +117,20 @@ def test_pose_batch_must_split_into_equal_groups():
         PoseNet(10)(torch.rand(5, 3, 64, 96), torch.rand(5, 3, 64, 96), groups=2)
 
 
-def test_pose_decoder_scales_its_output_by_exactly_0_01():
-    dec = networks.PoseDecoder(512)
+@pytest.mark.parametrize("rotation_scale", [None, 0.1])
+def test_pose_decoder_scales_its_output_by_exactly_0_01_or_the_rotation_scale(rotation_scale):
+    """Monodepth2's 0.01 on both by default; model.pose_rotation_scale on the axis-angle only."""
+    dec = networks.PoseDecoder(512) if rotation_scale is None else networks.PoseDecoder(512, rotation_scale)
     last = dec.net[-1]
     torch.nn.init.zeros_(last.weight)
     with torch.no_grad():
         last.bias.copy_(torch.arange(1.0, 7.0))
     aa, t = dec(torch.rand(2, 512, 2, 3))
-    assert torch.equal(aa, 0.01 * torch.tensor([1.0, 2, 3]).expand(2, 1, 3))
+    assert torch.equal(aa, (rotation_scale or 0.01) * torch.tensor([1.0, 2, 3]).expand(2, 1, 3))
     assert torch.equal(t, 0.01 * torch.tensor([4.0, 5, 6]).expand(2, 1, 3))
+    small = ["model.pretrained=false", "model.num_layers=10", f"model.pose_rotation_scale={rotation_scale or 0.01}"]
+    model = PoseConsModel(load_config(overrides=small))
+    assert model.pose_net.decoder.rotation_scale == (rotation_scale or 0.01)
 
 
 def test_group_sizes_equal_to_a_number_of_groups_give_bit_identical_outputs_and_statistics():

@@ -59,6 +59,7 @@ RULES: dict[str, Check] = {
     "model.num_layers": _one_of(10, 18, 34, 50),
     "model.pretrained": _one_of(True, False, "auto"),
     "model.min_depth": _POSITIVE,
+    "model.pose_rotation_scale": _POSITIVE,
     "model.max_depth": _POSITIVE,
     "model.scales": _rule(
         lambda v: v and len(set(v)) == len(v) and set(v) <= {0, 1, 2, 3},
@@ -132,6 +133,10 @@ class ModelConfig:
     # Pose of a pair = mean of the pose net's output for it and the mirrored output for its mirror image:
     # mirror-equivariant by construction (sideways motion, yaw and roll cannot hold a constant bias)
     pose_mirror: bool = False
+    # The pose decoder's axis-angle is this × its output (Monodepth2: 0.01, as for the translation). A
+    # rotation of 0.2 rad then needs an output of 20, which a scratch net reaches slowly; the translation
+    # needs no such size, its scale being free
+    pose_rotation_scale: float = 0.01
     # Warp with the data set's true camera motion (raw: oxts/ through the date's calibration files;
     # odometry: poses/NN.txt) instead of the pose net's. Not self-supervised: the depth learns metres
     # (set min/max_depth in metres) and the pose net is not trained, so no pose-net loss may be on

@@ -278,10 +278,12 @@ class DepthDecoder(nn.Module):
 
 
 class PoseDecoder(nn.Module):
-    """Deepest pose-encoder feature → (axis-angle (B, 1, 3), translation (B, 1, 3)), scaled by 0.01."""
+    """Deepest pose-encoder feature → (axis-angle (B, 1, 3), translation (B, 1, 3)), scaled by
+    ``rotation_scale`` and 0.01 (Monodepth2: 0.01 both)."""
 
-    def __init__(self, num_ch_in: int):
+    def __init__(self, num_ch_in: int, rotation_scale: float = 0.01):
         super().__init__()
+        self.rotation_scale = rotation_scale
         self.net = nn.Sequential(
             nn.Conv2d(num_ch_in, 256, 1),
             nn.ReLU(inplace=True),
@@ -293,8 +295,8 @@ class PoseDecoder(nn.Module):
         )
 
     def forward(self, feature: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        out = 0.01 * fp32_output(self.net[-1], self.net[:-1](feature)).mean((2, 3)).view(-1, 1, 6)
-        return out[..., :3], out[..., 3:]
+        out = fp32_output(self.net[-1], self.net[:-1](feature)).mean((2, 3)).view(-1, 1, 6)
+        return self.rotation_scale * out[..., :3], 0.01 * out[..., 3:]
 
 
 class DepthNet(nn.Module):
@@ -316,11 +318,13 @@ MIRROR_SIGN = torch.tensor([[1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]])
 class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
-    def __init__(self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False):
+    def __init__(
+        self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False, rotation_scale: float = 0.01
+    ):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, grouped=True)
         self.mirror = mirror
-        self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1])
+        self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1], rotation_scale)
 
     def forward(
         self,
