@@ -524,7 +524,8 @@ def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, bas
 def test_a_known_motion_model_predicts_metres_and_no_motion(ckpt, frames_dir, tmp_path, capsys):
     """Its pose net was never trained: predict says the depth is metric (scale 1), writes no
     trajectory and refuses --stabilise; export leaves the pose graph out and says metres, and
-    predict from that export says metric too."""
+    predict from that export says metric too. A known_rotation model's depth has the usual free
+    scale, and its pose net no trained rotation: no trajectory, no pose graph."""
     state = load_checkpoint(ckpt)
     state["config"]["model"]["known_motion"] = True
     metric = tmp_path / "metric.pt"
@@ -541,6 +542,17 @@ def test_a_known_motion_model_predicts_metres_and_no_motion(ckpt, frames_dir, tm
         assert not (out / "trajectory_kitti.txt").exists()
     stabilise = ["predict", "--checkpoint", str(metric), "--input", str(frames_dir), "--stabilise"]
     _fails(stabilise, tmp_path / "stab", capsys, "no trained pose network")
+    state["config"]["model"].update(known_motion=False, known_rotation=True)  # its rotation untrained
+    save_checkpoint(gyro := tmp_path / "gyro.pt", state)
+    assert (
+        main(
+            ["predict", "--checkpoint", str(gyro), "--input", str(frames_dir), "--out", str(tmp_path / "g"), "--quiet"]
+        )
+        == 0
+    )
+    assert json.loads((tmp_path / "g" / "scale.json").read_text())["method"] == "none"
+    assert not (tmp_path / "g" / "trajectory_kitti.txt").exists()
+    assert set(export_model(gyro, tmp_path / "gyro_export")["files"]) == {"depth", "weights"}
 
 
 def test_export_of_a_mirrored_pose_net_matches_pytorch_at_batch_1_and_2(tmp_path):

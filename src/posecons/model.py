@@ -9,7 +9,8 @@ Batch keys (see ``posecons.data``):
     net_frames  (B, F, 3, H, W) optional: what the networks see, e.g. colour-jittered by
                 :func:`posecons.data.augment.jitter_batch`; the losses always use ``frames`` (SPEC §6)
     motions     (B, F − 1, 4, 4) the camera's true motion T_{f←0} to each source, in metres: needed by
-                model.known_motion (which warps with it) and loss.velocity_weight (its lengths)
+                model.known_motion (which warps with it), model.known_rotation (its rotations) and
+                loss.velocity_weight (its lengths)
 """
 
 from __future__ import annotations

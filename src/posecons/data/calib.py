@@ -177,6 +177,7 @@ def rectified_offset(p_rect: np.ndarray) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=64)
 def imu_to_camera(date_dir: Path, cam: int = 2) -> np.ndarray:
     """(4, 4) GNSS/INS unit → rectified camera ``cam``: offset · R_rect_00 · [R|T]_velo→cam · [R|T]_imu→velo."""
     date_dir = Path(date_dir)

@@ -123,7 +123,7 @@ class FrameDataset(Dataset):
             c = self.camera_poses(line, [line.frame + f for f in self.frame_ids])
         except PoseconsError as exc:
             raise PoseconsError(
-                f"{exc} (loss.velocity_weight and model.known_motion need the camera's motion)"
+                f"{exc} (loss.velocity_weight, model.known_motion and known_rotation need the camera's motion)"
             ) from exc
         return (np.linalg.inv(c[1:]) @ c[0]).astype(np.float32)
 

@@ -51,8 +51,9 @@ class TorchPredictor(Predictor):
         self.device = torch.device(device)
         self.model, self.config, self.name = model, model.config, name
         self.height, self.width = self.config.model.height, self.config.model.width
-        self.metric = self.config.model.known_motion
-        self.has_pose = not self.metric  # a known_motion run never trains its pose net
+        m = self.config.model
+        self.metric = m.known_motion
+        self.has_pose = not (m.known_motion or m.known_rotation)  # their pose net's rotation is never trained
 
     @torch.no_grad()
     def disparity(self, images: np.ndarray) -> torch.Tensor:

@@ -87,7 +87,8 @@ METRES = " (metres: trained with the true motion)"
 
 
 def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-4, batch: int = 2) -> dict:
-    """Write depth.onnx, pose.onnx (not for a model.known_motion run), weights.safetensors and export.json into ``out``.
+    """Write depth.onnx, pose.onnx (not for a known_motion or known_rotation run), weights.safetensors and
+    export.json into ``out``.
 
     The ONNX graphs are traced with batch 1 and verified with ``batch`` random frames (so the
     dynamic batch axis is exercised); a difference above ``tolerance`` raises PoseconsError and
@@ -97,10 +98,10 @@ def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-
     h, w = config.model.height, config.model.width
     generator = torch.Generator().manual_seed(0)
     sample = torch.rand(3, batch, 3, h, w, generator=generator)
-    # A known_motion run never trains its pose net, and its depth is in metres.
+    # known_motion and known_rotation runs never train their pose net's rotation; known_motion's depth is metric.
     metric = config.model.known_motion
     graphs = {"depth": (DepthGraph(model), DEPTH_ONNX, {"images": sample[0]}, ["disparity"])}
-    if not metric:
+    if not (metric or config.model.known_rotation):
         graphs["pose"] = (PoseGraph(model), POSE_ONNX, {"image_a": sample[1], "image_b": sample[2]}, ["pose", "matrix"])
     with output_dir(out) as tmp:
         diffs = {}
