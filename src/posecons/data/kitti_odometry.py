@@ -77,13 +77,18 @@ class KittiOdometryDataset(FrameDataset):
         known = self._poses[sequence]
         if max(frames) >= len(known):
             raise PoseconsError(f"{self.data_path}/poses/{sequence:02d}.txt: no pose for frame {max(frames)}")
-        calib = sequence_dir(self.data_path, line.folder) / "calib.txt"
-        offset = rectified_offset(read_odometry_projection(calib, SIDE_TO_CAMERA[line.side]))
-        return known[list(frames)] @ np.linalg.inv(offset)
+        key = (sequence, line.side)
+        if key not in self._offsets:  # camera 0 → this camera, read once a sequence and side
+            calib = sequence_dir(self.data_path, line.folder) / "calib.txt"
+            self._offsets[key] = np.linalg.inv(
+                rectified_offset(read_odometry_projection(calib, SIDE_TO_CAMERA[line.side]))
+            )
+        return known[list(frames)] @ self._offsets[key]
 
     def __init__(self, *args, **kwargs) -> None:
         self._k_cache: dict[tuple[int, str], np.ndarray] = {}
         self._poses: dict[int, np.ndarray] = {}
+        self._offsets: dict[tuple[int, str], np.ndarray] = {}
         super().__init__(*args, **kwargs)
 
     def check_files(self) -> None:
