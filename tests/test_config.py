@@ -50,6 +50,7 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("model.scales=[0,4]", "model.scales must be distinct scales from 0–3"),
         ("model.min_depth=100", "model.min_depth .* must be below model.max_depth"),
         ("model.pose_rotation_scale=0", "model.pose_rotation_scale must be > 0"),
+        ("loss.far_rotation_fraction=0", r"loss.far_rotation_fraction must be in \(0, 1\]"),
         ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.ema_decay=-0.1", r"^train.ema_decay must be in \[0, 1\), got -0.1$"),
@@ -66,12 +67,18 @@ def test_bad_values_are_rejected(override, message):
         load_config(overrides=[override])
 
 
-@pytest.mark.parametrize("extra", ["loss.constraints=[fb]", "loss.skip_weight=0.1", "loss.velocity_weight=0.1"])
+@pytest.mark.parametrize(
+    "extra", ["loss.constraints=[fb]", "loss.skip_weight=0.1", "loss.velocity_weight=0.1", "loss.far_rotation_weight=1"]
+)
 def test_known_motion_refuses_every_loss_that_trains_the_pose_net(extra):
     assert load_config(overrides=["model.known_motion=true"]).model.known_motion
     assert load_config(overrides=[extra]).model.known_motion is False
     with pytest.raises(PoseconsError, match=r"^model.known_motion=true leaves the pose net untrained"):
         load_config(overrides=["model.known_motion=true", extra])
+    if extra == "loss.far_rotation_weight=1":  # it trains the rotation alone
+        with pytest.raises(PoseconsError, match=r"^model.known_rotation=true .* loss.far_rotation_weight"):
+            load_config(overrides=["model.known_rotation=true", extra])
+        return
     load_config(overrides=["model.known_rotation=true", extra])  # the pose net still gives the translation
 
 

@@ -8,6 +8,7 @@ from posecons.geometry import invert_pose, make_pose, pose_vec_to_mat
 from posecons.losses import (
     cycle_loss,
     depth_consistency_loss,
+    far_rotation_loss,
     forward_backward_loss,
     identity_loss,
     min_reprojection,
@@ -16,6 +17,7 @@ from posecons.losses import (
     ssim_dissimilarity,
     velocity_loss,
 )
+from sky import sky_view
 
 
 def poses(b=4):
@@ -255,3 +257,76 @@ def test_depth_consistency_gradients_reach_both_depths_and_float32_agrees_with_f
     assert val.item() == pytest.approx(ref.item(), rel=1e-5)
     assert torch.allclose(target_grad.double(), ref_target_grad, rtol=1e-3, atol=1e-7)
     assert torch.allclose(source_grad.double(), ref_source_grad, rtol=1e-3, atol=1e-7)
+
+
+SKY_H, SKY_W = 64, 96
+SKY_K = torch.tensor([[0.58 * SKY_W, 0, 0.5 * SKY_W], [0, 1.92 * SKY_H, 0.5 * SKY_H], [0, 0, 1]], dtype=torch.float64)
+
+
+def rotation(axisangle) -> torch.Tensor:
+    e = torch.as_tensor(axisangle, dtype=torch.float64).view(1, 1, 3)
+    return pose_vec_to_mat(e, torch.zeros_like(e))[0, :3, :3]
+
+
+def far_rotation(target, sources, rotations, depth, fraction=1.0):
+    """far_rotation_loss of (B, 3, H, W) targets, (B, S, 3, H, W) sources, (B, S, 3, 3) float64 R."""
+    K = SKY_K.float().expand(len(target), 3, 3)
+    return far_rotation_loss(target, sources, rotations.float(), K, depth, fraction)
+
+
+def test_far_rotation_loss_is_least_at_the_true_rotation_and_its_gradient_turns_toward_it():
+    """A sky at infinity before and after a turn of 2.4° (mostly yaw): the source warped by the true
+    rotation reproduces the target up to interpolation; no turn, the opposite turn (Rᵀ: the
+    convention swapped) and the same angle about the pitch axis do not. From no turn, the gradient's
+    descent turns toward the true rotation, about the yaw axis most. Caught: R transposed, a translation or the depth let in."""
+    true = torch.tensor([0.005, 0.04, 0.008])
+    target = sky_view(torch.eye(3, dtype=torch.float64), SKY_K, SKY_H, SKY_W)[None]
+    source = sky_view(rotation(true), SKY_K, SKY_H, SKY_W)[None, None]
+    depth = torch.ones(1, 1, SKY_H, SKY_W, requires_grad=True)
+
+    def loss(R):
+        return far_rotation(target, source, R[None, None], depth)
+
+    at_truth = loss(rotation(true))
+    assert at_truth < 0.002
+    assert loss(torch.eye(3, dtype=torch.float64)) > 10 * at_truth
+    assert loss(rotation(true).T) > 2 * loss(torch.eye(3, dtype=torch.float64))
+    assert loss(rotation([true.norm(), 0, 0])) > 10 * at_truth
+    w = torch.zeros(3, dtype=torch.float64, requires_grad=True)
+    loss(rotation(w)).backward()
+    descent = -w.grad
+    assert descent @ true.double() > 0 and descent.abs().argmax() == 1  # toward the turn, mostly its yaw
+    assert depth.grad is None  # the ranking only: no gradient to the depth
+
+
+def test_far_rotation_loss_pairs_each_sample_and_source_with_its_own_rotation():
+    """Two samples, two sources each, four different turns: each (sample, source) pair warped by its
+    own rotation explains the sky; the (B, S) rotations read in (S, B) order do not."""
+    turns = torch.tensor([[[0, 0.03, 0], [0, -0.02, 0.01]], [[0.01, 0.05, 0], [0, -0.04, 0]]], dtype=torch.float64)
+    R = torch.stack([torch.stack([rotation(t) for t in sample]) for sample in turns])
+    target = sky_view(torch.eye(3, dtype=torch.float64), SKY_K, SKY_H, SKY_W).expand(2, 3, SKY_H, SKY_W)
+    sources = torch.stack([torch.stack([sky_view(r, SKY_K, SKY_H, SKY_W) for r in sample]) for sample in R])
+    depth = torch.ones(2, 1, SKY_H, SKY_W)
+    right = far_rotation(target, sources, R, depth)
+    assert right < 0.002
+    assert far_rotation(target, sources, R.transpose(0, 1).reshape(R.shape), depth) > 10 * right
+
+
+def test_far_rotation_loss_counts_only_the_farthest_fraction_by_depth():
+    """The source's rows below the top 40 % replaced by noise (what the translation moves in a real
+    scene), the depth falling from the top row down: the far third's loss at the true rotation is the
+    clean sky's; with the depth's order reversed (the far third in the noise), or every pixel counted,
+    it is not. Caught: the quantile taken from the near end, disparity ranked as depth."""
+    R = rotation([0.0, 0.03, 0.0])
+    target = sky_view(torch.eye(3, dtype=torch.float64), SKY_K, SKY_H, SKY_W)[None]
+    clean = sky_view(R, SKY_K, SKY_H, SKY_W)[None, None]
+    noisy = clean.clone()
+    noisy[..., int(0.4 * SKY_H) :, :] = torch.rand_like(noisy[..., int(0.4 * SKY_H) :, :])
+    falling = (100.0 / (1 + torch.arange(SKY_H, dtype=torch.float32))).view(1, 1, SKY_H, 1).expand(1, 1, SKY_H, SKY_W)
+    far_third = far_rotation(target, noisy, R[None, None], falling, 1 / 3)
+    assert far_third.item() == pytest.approx(
+        far_rotation(target, clean, R[None, None], falling, 1 / 3).item(), abs=1e-6
+    )
+    assert far_third < 0.002
+    assert far_rotation(target, noisy, R[None, None], falling.flip(2), 1 / 3) > 0.05
+    assert far_rotation(target, noisy, R[None, None], falling, 1.0) > 10 * far_third

@@ -9,6 +9,7 @@ from posecons.config import load_config
 from posecons.geometry import pose_vec_to_mat
 from posecons.losses import cycle_loss, forward_backward_loss, identity_loss
 from posecons.model import PairPoses, PoseConsModel, temporal
+from sky import sky_view
 
 H, W = 64, 96
 ALL = ["fb", "id", "cyc"]
@@ -188,6 +189,34 @@ def test_known_rotation_warps_with_the_batch_rotation_and_the_pose_nets_translat
         torch.testing.assert_close(poses[f][:, :3, :3], motions[:, i, :3, :3])
         torch.testing.assert_close(poses[f][:, :3, 3], net_poses[f][:, :3, 3])
         assert not torch.allclose(poses[f][:, :3, :3], net_poses[f][:, :3, :3], atol=1e-3)
+
+
+def test_far_rotation_loss_takes_each_sources_rotation_from_the_pose_net_and_not_its_translation():
+    """Frames of a sky at infinity along a turning trajectory, a pose net returning the true motions:
+    the far-rotation loss is at interpolation error for both sources (the past source's rotation is
+    the inverse of its pair's output) whatever the camera's translation, and adds its weight times
+    itself to the total; the sources' motions exchanged explain the sky worse."""
+    frame_ids = [0, -1, 1]
+    K = random_batch()["intrinsics"]
+    K_pixels = (K[0] * torch.tensor([[W], [H], [1.0]])).double()
+
+    def far_rotation(world: dict, frames_world: dict) -> dict:
+        frames = torch.stack([sky_view(frames_world[f][:3, :3].T, K_pixels, H, W) for f in frame_ids])
+        frames = frames.expand(2, -1, -1, -1, -1)
+        model = PoseConsModel(make_config(**{"loss.far_rotation_weight": 0.5}))
+        model.depth_net = ConstantDepth(0.5)  # every pixel ties with the cut-off, so all count
+        model.pose_net = TrajectoryPoseNet(frames, frame_ids, world)
+        return model({"frames": frames, "intrinsics": K})[1]
+
+    world = world_poses(frame_ids, 0.02, step=(0.5, 0.1, 1.0))
+    losses = far_rotation(world, world)
+    assert losses["far_rotation"] < 0.01
+    still = far_rotation(world_poses(frame_ids, 0.02, step=(0.0, 0.0, 0.0)), world)  # the same turns, no travel
+    assert still["far_rotation"].item() == pytest.approx(losses["far_rotation"].item(), abs=1e-6)
+    expected = losses["photometric"] + losses["smoothness"] + 0.5 * losses["far_rotation"]
+    torch.testing.assert_close(losses["total"], expected)
+    exchanged = far_rotation({0: world[0], -1: world[1], 1: world[-1]}, world)
+    assert exchanged["far_rotation"] > 5 * losses["far_rotation"]
 
 
 @pytest.mark.parametrize("layout", ["right", "sources_swapped", "samples_transposed"])

@@ -80,6 +80,8 @@ RULES: dict[str, Check] = {
     "loss.depth_consistency_form": _one_of("one_way", "sc_depth"),
     "loss.skip_weight": _at_least(0),
     "loss.velocity_weight": _at_least(0),
+    "loss.far_rotation_weight": _at_least(0),
+    "loss.far_rotation_fraction": _rule(lambda v: 0 < v <= 1, "must be in (0, 1]"),
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
     "data.img_ext": _rule(bool, "must be an extension such as .png"),
@@ -175,6 +177,11 @@ class LossConfig:
     # (raw: oxts/, odometry: poses/NN.txt; losses.velocity_loss). One scale for every training pair,
     # not metres; needs those files for the training split
     velocity_weight: float = 0.0
+    # The pose net's rotation taught by the far pixels (losses.far_rotation_loss; not in the paper): each
+    # source warped by T_{f←0}'s rotation alone, photometric error over the target's farthest
+    # far_rotation_fraction of pixels by its predicted depth, averaged over the scales at their own sizes
+    far_rotation_weight: float = 0.0
+    far_rotation_fraction: float = 0.3333
 
 
 @dataclass
@@ -259,10 +266,17 @@ class Config:
             )
         if min(m.height, m.width) < 64:  # the 1/32-size features must be ≥ 2 pixels for their reflection padding
             raise PoseconsError(f"model.height/width must be at least 64, got {m.height}×{m.width}")
-        if m.known_motion and (lo.constraints or lo.skip_weight > 0 or lo.velocity_weight > 0):
+        if m.known_motion and (
+            lo.constraints or lo.skip_weight > 0 or lo.velocity_weight > 0 or lo.far_rotation_weight > 0
+        ):
             raise PoseconsError(
                 "model.known_motion=true leaves the pose net untrained: set loss.constraints=[], "
-                "loss.skip_weight=0 and loss.velocity_weight=0"
+                "loss.skip_weight=0, loss.velocity_weight=0 and loss.far_rotation_weight=0"
+            )
+        if m.known_rotation and lo.far_rotation_weight > 0:
+            raise PoseconsError(
+                "model.known_rotation=true warps with the data's rotation, so loss.far_rotation_weight "
+                "would train a rotation nothing uses: set it to 0"
             )
         if m.known_motion and m.known_rotation:
             raise PoseconsError(

@@ -7,7 +7,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from .geometry import check_tensor, invert_pose, pose_distance, project_depth
+from .geometry import check_tensor, invert_pose, make_pose, pose_distance, project_depth, warp
 
 _IMAGE = (None, None, None, None)
 
@@ -155,3 +155,36 @@ def velocity_loss(translation: torch.Tensor, distance: torch.Tensor) -> torch.Te
     length = translation.norm(dim=-1).squeeze(1)
     scale = (length.sum() / distance.sum().clamp(min=1e-12)).detach()
     return (length - scale * distance).abs().mean() / length.mean().detach().clamp(min=1e-12)
+
+
+# ----------------------------------------------------------------------------- far pixels' rotation (not in the paper)
+
+
+def far_rotation_loss(
+    target: torch.Tensor,
+    sources: torch.Tensor,
+    rotations: torch.Tensor,
+    K: torch.Tensor,
+    depth: torch.Tensor,
+    fraction: float,
+    ssim_weight: float = 0.85,
+) -> torch.Tensor:
+    """Mean photometric error of each source warped by its rotation alone, over the target's farthest
+    ``fraction`` of pixels by ``depth``: a point at infinity moves by the homography K R K⁻¹ whatever
+    the translation, so these pixels teach the pose net's rotation without going through a depth that
+    may be compressed there. Only the ranking of ``depth`` is used (detached: the loss trains R alone);
+    pixels tied with the cut-off count as far.
+
+    target (B, 3, H, W); sources (B, S, 3, H, W); rotations (B, S, 3, 3), R of T_{f←0}; K: pixel K
+    (B, 3, 3) at this size; depth (B, 1, H, W); fraction in (0, 1].
+    """
+    b, s = sources.shape[:2]
+    check_tensor("sources", sources, (target.shape[0], None, *target.shape[1:]))
+    check_tensor("rotations", rotations, (b, s, 3, 3))
+    check_tensor("depth", depth, (b, 1, *target.shape[-2:]))
+    depth = depth.detach()
+    far = depth >= depth.flatten(1).quantile(1 - fraction, dim=1).view(b, 1, 1, 1)
+    T = make_pose(rotations.flatten(0, 1), rotations.new_zeros(b * s, 3))  # (S·B order: b-major)
+    warped = warp(sources.flatten(0, 1), depth.repeat_interleave(s, 0), T, K.repeat_interleave(s, 0))
+    error = photometric_error(warped, target.repeat_interleave(s, 0), ssim_weight).view(b, s, *depth.shape[-2:])
+    return (error * far).sum() / (far.sum() * s)

@@ -28,6 +28,7 @@ from .losses import (
     cycle_loss,
     depth_consistency_loss,
     depth_difference,
+    far_rotation_loss,
     forward_backward_loss,
     identity_loss,
     min_reprojection,
@@ -222,8 +223,12 @@ class PoseConsModel(nn.Module):
                     torch.cat([P.vector(*temporal(f))[1] for f in sources]), d.t().reshape(-1)
                 )
                 terms.append("velocity")
+            if lo.far_rotation_weight > 0:
+                losses["far_rotation"] = self._far_rotation(frames.float(), K, disps, poses)
+                terms.append("far_rotation")
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
             weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight, velocity=lo.velocity_weight)
+            weights.update(far_rotation=lo.far_rotation_weight)
             losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in terms)
 
         outputs = {
@@ -274,6 +279,27 @@ class PoseConsModel(nn.Module):
         reprojection = self.photometric_error(warp(source, depth, T_skip, K), target, lo.ssim_weight)
         identity = self.photometric_error(source, target, lo.ssim_weight) if lo.automask else None
         return min_reprojection(reprojection, identity)[0].mean()
+
+    def _far_rotation(
+        self, frames: torch.Tensor, K_norm: torch.Tensor, disps: dict, poses: dict[int, torch.Tensor]
+    ) -> torch.Tensor:
+        """losses.far_rotation_loss of the sources warped by the rotation of T_{f←0}, averaged over the
+        scales, each at its native size: a turn of 0.1–0.25 rad between frames ±3 moves the far pixels
+        by 10–30 px at 192×64, which the coarsest scale sees as 1–4 px."""
+        m, lo = self.config.model, self.config.loss
+        rotations = torch.stack([poses[f][:, :3, :3] for f in m.frame_ids[1:]], 1)
+        terms = []
+        for s in m.scales:
+            hs, ws = disps[s].shape[-2:]
+            images = _resize(frames.flatten(0, 1), hs, ws).view(*frames.shape[:3], hs, ws)
+            depth = disp_to_depth(disps[s].float(), m.min_depth, m.max_depth)[1]
+            K = scale_intrinsics(K_norm, hs, ws)
+            terms.append(
+                far_rotation_loss(
+                    images[:, 0], images[:, 1:], rotations, K, depth, lo.far_rotation_fraction, lo.ssim_weight
+                )
+            )
+        return torch.stack(terms).mean()
 
     def _view_synthesis_losses(
         self,
