@@ -1,7 +1,8 @@
 """How a checkpoint's pose net moves on a test sequence: whether its translation follows the true
 motion (correlation of |t| with the true distance, cosine with the true direction), whether its
-rotation does (correlation of the angle with the true angle, their mean ratio, cosine of the axes:
-what hand-held, rotation-heavy motion tests), and whether its
+rotation does (correlation of the angle with the true angle, their mean ratio, cosine of the axes,
+also weighted by the angles, and the slope of the yaw on the true yaw: what hand-held, rotation-heavy
+motion and turns test), and whether its
 mirror-odd outputs — sideways translation t_x, yaw and roll — flip sign for mirrored frames, as they
 must for a horizontally symmetric world. A pose net that outputs the same t_x for a pair and for its
 mirror image has learnt a constant bias, not motion (docs/results.md). For the depth net: the mean
@@ -57,6 +58,9 @@ def pose_bias(checkpoint: Path, odometry: Path, sequence: str, stride: int) -> d
         "corr_angle": float(np.corrcoef(angle, true_angle)[0, 1]),
         "angle_over_true": float(angle.mean() / true_angle.mean()),
         "cos_axis": float(np.mean((rot * true_rot).sum(1) / angle / true_angle)),
+        # Weighted by the angles: on a straight drive the mean above is over axes of near-zero turns
+        "cos_axis_weighted": float((rot * true_rot).sum() / (angle * true_angle).sum()),
+        "yaw_slope": float(np.polyfit(true_rot[:, 1], rot[:, 1], 1)[0]),  # 1: the true yaw, turn for turn
         "yaw_mrad": 1e3 * float(rot[:, 1].mean()),
         "yaw_mrad_mirrored": 1e3 * float(rot_m[:, 1].mean()),
         "disp_left": float(disp[..., :half].mean()),
