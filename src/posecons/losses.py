@@ -184,7 +184,7 @@ def far_rotation_loss(
     check_tensor("depth", depth, (b, 1, *target.shape[-2:]))
     depth = depth.detach()
     far = depth >= depth.flatten(1).quantile(1 - fraction, dim=1).view(b, 1, 1, 1)
-    T = make_pose(rotations.flatten(0, 1), rotations.new_zeros(b * s, 3))  # (S·B order: b-major)
+    T = make_pose(rotations.flatten(0, 1), rotations.new_zeros(b * s, 3))  # (B·S), sample-major
     warped = warp(sources.flatten(0, 1), depth.repeat_interleave(s, 0), T, K.repeat_interleave(s, 0))
     error = photometric_error(warped, target.repeat_interleave(s, 0), ssim_weight).view(b, s, *depth.shape[-2:])
     return (error * far).sum() / (far.sum() * s)
