@@ -1,10 +1,11 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
-once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, early_steps.py, ema_decays.py and
+once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, early_steps.py, ema_decays.py, scale_components.py and
 test_time_scale.py as their tests say; a folder that is no study is one line and exit status 2."""
 
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -279,3 +280,35 @@ def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_i
     done = subprocess.run(tool_cmd, capture_output=True, text=True)
     missing = f"error: checkpoint {tmp_path / 'last.pt'} does not exist\n"
     assert (done.returncode, done.stdout, done.stderr) == (2, "", missing)
+
+
+def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
+    """experiments/tools/scale_components.py on one run whose EMA scales are constant and whose raw
+    scales grow as the scene's depth^0.5: ``v`` gives slope 0 and ``v@raw`` slope 0.5, and the paired
+    row is their difference. Caught: ``@raw`` ignored (both slopes 0), or the EMA read for both."""
+    from posecons.data.gt import write_gt
+    from posecons.data.splits import SplitLine
+
+    scene = np.array([4.0, 8.0, 16.0, 32.0])
+    write_gt(
+        tmp_path / "gt.npz",
+        [np.full((2, 3), d, np.float32) for d in scene],
+        [SplitLine("d/s", i, "l") for i in range(4)],
+    )
+    frame = lambda scales: {
+        "depth": {"frame": {"scales": list(scales), "scale_cv": float(np.std(scales) / np.mean(scales))}}
+    }
+    run = {**frame(np.ones(4)), "raw_weights": frame(np.sqrt(scene))}
+    (tmp_path / "v_seed0.json").write_text(json.dumps(run))
+    cmd = [
+        sys.executable,
+        str(TOOLS / "scale_components.py"),
+        "--results",
+        str(tmp_path),
+        "--gt",
+        str(tmp_path / "gt.npz"),
+    ]
+    out = subprocess.run([*cmd, "v", "v@raw"], capture_output=True, text=True, check=True).stdout.splitlines()
+    slope = {line.split()[0]: float(line.split()[5]) for line in out[1:3]}
+    assert slope == pytest.approx({"v": 0.0, "v@raw": 0.5})
+    assert out[3].startswith("v@raw − v") and float(out[3].split()[7]) == pytest.approx(0.5)

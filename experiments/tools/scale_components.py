@@ -2,9 +2,10 @@
 frame scales, how strongly the scale follows the scene's depth (log-log slope and correlation with
 the frame's median LiDAR depth), the σ/μ left once that dependence is divided out, and the
 frame-to-frame jitter (:func:`posecons.metrics.depth.scale_vs_scene_depth`; experiments/investigation.md §4);
-then, seed by seed, each variant's difference from the first one named.
+then, seed by seed, each variant's difference from the first one named. ``VARIANT@raw`` reads the
+runs' raw weights instead of their EMA weights (as experiments/tools/paired.py does).
 
-    python experiments/tools/scale_components.py --results OUT/results --gt OUT/gt/test_depth.npz baseline cyc [...]
+    python experiments/tools/scale_components.py --results OUT/results --gt OUT/gt/test_depth.npz baseline@raw cyc [...]
 """
 
 from __future__ import annotations
@@ -33,8 +34,10 @@ def main() -> None:
     print(f"{'variant':14s} seeds  {'σ/μ':15s}  " + "  ".join(f"{k:15s}" for k in KEYS))
     table = {}
     for variant in args.variants:
-        for path in sorted(args.results.glob(f"{variant}_seed*.json")):
-            depth = json.loads(path.read_text())["depth"]["frame"]
+        name, _, weights = variant.partition("@")
+        for path in sorted(args.results.glob(f"{name}_seed*.json")):
+            run = json.loads(path.read_text())
+            depth = (run["raw_weights"] if weights == "raw" else run)["depth"]["frame"]
             parts = scale_vs_scene_depth(depth["scales"], scene, sequences)
             table.setdefault(variant, {})[path.stem.rsplit("_seed", 1)[1]] = [
                 depth["scale_cv"],
