@@ -285,7 +285,7 @@ def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_i
 def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
     """experiments/tools/scale_components.py on one run whose EMA scales are constant and whose raw
     scales grow as the scene's depth^0.5: ``v`` gives slope 0 and ``v@raw`` slope 0.5, and the paired
-    row is their difference. Caught: ``@raw`` ignored (both slopes 0), or the EMA read for both."""
+    row is their difference. Caught: ``@raw`` ignored (both slopes 0), or the raw weights read for both."""
     from posecons.data.gt import write_gt
     from posecons.data.splits import SplitLine
 
@@ -295,9 +295,10 @@ def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
         [np.full((2, 3), d, np.float32) for d in scene],
         [SplitLine("d/s", i, "l") for i in range(4)],
     )
-    frame = lambda scales: {
-        "depth": {"frame": {"scales": list(scales), "scale_cv": float(np.std(scales) / np.mean(scales))}}
-    }
+
+    def frame(scales):
+        return {"depth": {"frame": {"scales": list(scales), "scale_cv": float(np.std(scales) / np.mean(scales))}}}
+
     run = {**frame(np.ones(4)), "raw_weights": frame(np.sqrt(scene))}
     (tmp_path / "v_seed0.json").write_text(json.dumps(run))
     cmd = [
