@@ -285,7 +285,8 @@ def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_i
 def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
     """experiments/tools/scale_components.py on one run whose EMA scales are constant and whose raw
     scales grow as the scene's depth^0.5: ``v`` gives slope 0 and ``v@raw`` slope 0.5, and the paired
-    row is their difference. Caught: ``@raw`` ignored (both slopes 0), or the raw weights read for both."""
+    row is their difference; a misspelt variant is one line and exit 2. Caught: ``@raw`` ignored (both
+    slopes 0), or the raw weights read for both."""
     from posecons.data.gt import write_gt
     from posecons.data.splits import SplitLine
 
@@ -299,7 +300,7 @@ def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
     def frame(scales):
         return {"depth": {"frame": {"scales": list(scales), "scale_cv": float(np.std(scales) / np.mean(scales))}}}
 
-    run = {**frame(np.ones(4)), "raw_weights": frame(np.sqrt(scene))}
+    run = {"variant": "v", "seed": 0, **frame(np.ones(4)), "raw_weights": frame(np.sqrt(scene))}
     (tmp_path / "v_seed0.json").write_text(json.dumps(run))
     cmd = [
         sys.executable,
@@ -313,3 +314,5 @@ def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
     slope = {line.split()[0]: float(line.split()[5]) for line in out[1:3]}
     assert slope == pytest.approx({"v": 0.0, "v@raw": 0.5})
     assert out[3].startswith("v@raw − v") and float(out[3].split()[7]) == pytest.approx(0.5)
+    done = subprocess.run([*cmd, "v@rwa"], capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", f"error: {tmp_path}: no v@rwa_seed*.json\n")

@@ -3,7 +3,7 @@ frame scales, how strongly the scale follows the scene's depth (log-log slope an
 the frame's median LiDAR depth), the σ/μ left once that dependence is divided out, and the
 frame-to-frame jitter (:func:`posecons.metrics.depth.scale_vs_scene_depth`; experiments/investigation.md §4);
 then, seed by seed, each variant's difference from the first one named. ``VARIANT@raw`` reads the
-runs' raw weights instead of their EMA weights (as experiments/tools/paired.py does).
+runs' raw weights instead of their EMA weights, through experiments/tools/paired.py's reader.
 
     python experiments/tools/scale_components.py --results OUT/results --gt OUT/gt/test_depth.npz baseline@raw cyc [...]
 """
@@ -11,12 +11,14 @@ runs' raw weights instead of their EMA weights (as experiments/tools/paired.py d
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 from pathlib import Path
 
 import numpy as np
+from paired import side  # the sibling tool's reader of RESULTS/VARIANT[@raw]
 
 from posecons.data.gt import load_gt
+from posecons.errors import PoseconsError
 from posecons.metrics.depth import scale_vs_scene_depth
 
 KEYS = ("slope", "corr", "scale_cv_rest", "jitter")
@@ -28,18 +30,21 @@ def main() -> None:
     p.add_argument("--gt", type=Path, required=True, help="the study's exported test ground truth")
     p.add_argument("variants", nargs="+")
     args = p.parse_args()
-    maps, lines = load_gt(args.gt)
+    try:
+        maps, lines = load_gt(args.gt)
+        runs = {variant: side(str(args.results / variant)) for variant in args.variants}
+    except PoseconsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     scene = np.array([np.median(m[m > 0]) for m in maps])
     sequences = [line.split()[0] for line in lines]
     print(f"{'variant':14s} seeds  {'σ/μ':15s}  " + "  ".join(f"{k:15s}" for k in KEYS))
     table = {}
-    for variant in args.variants:
-        name, _, weights = variant.partition("@")
-        for path in sorted(args.results.glob(f"{name}_seed*.json")):
-            run = json.loads(path.read_text())
-            depth = (run["raw_weights"] if weights == "raw" else run)["depth"]["frame"]
+    for variant, variant_runs in runs.items():
+        for run in variant_runs:
+            depth = run["depth"]["frame"]
             parts = scale_vs_scene_depth(depth["scales"], scene, sequences)
-            table.setdefault(variant, {})[path.stem.rsplit("_seed", 1)[1]] = [
+            table.setdefault(variant, {})[run["seed"]] = [
                 depth["scale_cv"],
                 *(parts[k] for k in KEYS),
             ]
