@@ -4,6 +4,7 @@ test_time_scale.py as their tests say; a folder that is no study is one line and
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import json
 import os
@@ -316,3 +317,55 @@ def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):
     assert out[3].startswith("v@raw − v") and float(out[3].split()[7]) == pytest.approx(0.5)
     done = subprocess.run([*cmd, "v@rwa"], capture_output=True, text=True)
     assert (done.returncode, done.stdout, done.stderr) == (2, "", f"error: {tmp_path}: no v@rwa_seed*.json\n")
+
+
+def test_continue_runs_makes_the_longer_run_of_the_same_seed(make_synth, tmp_path, capsys):
+    """experiments/tools/continue_runs.py: a 2-step run copied and resumed to 4 steps equals the 4-step
+    run of its seed, raw weights and EMA to the bit, and its folder holds the config the study checks.
+    Caught: the copy leaving out the checkpoints (a fresh start, its step not 2), the source's own
+    config written (the study refuses it; a resume would stop at step 2), a spec whose longer variant
+    differs in more than its length, a finished target overwritten."""
+    import yaml
+
+    from posecons.study.runner import config_changes
+    from posecons.study.spec import load_spec
+    from posecons.training.trainer import train
+    from tiny import TINY_MODEL
+
+    load = importlib.util.spec_from_file_location("continue_runs", TOOLS / "continue_runs.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    data = make_synth(2, 16, 192, 64)
+    synth = {"drives": 2, "frames": 16, "width": 192, "height": 64, "neighbours": 1, "seed": 0}
+    common = [*TINY_MODEL, "model.frame_ids=[0,-1,1]", "train.val_every=off", "train.ema_decay=0.5", "train.lr=1e-3"]
+    variants = {
+        "short": ["train.max_steps=2"],
+        "long": ["train.max_steps=4"],
+        "other": ["train.max_steps=4", "train.lr=1e-4"],
+    }
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        yaml.safe_dump(
+            {"preset": "synth/demo", "overrides": common, "data": {"synth": synth}, "seeds": [0], "variants": variants}
+        )
+    )
+    study = tmp_path / "study"
+    config = functools.partial(load_spec(str(spec)).config, seed=0)
+    train(config("short"), data, study / "runs" / "short" / "seed0", quiet=True)
+    train(config("long"), data, tmp_path / "fresh", quiet=True)
+
+    run = tool.continue_run(str(spec), study, "short", "long", 0)
+    assert run == study / "runs" / "long" / "seed0" and load_checkpoint(run / "checkpoints" / "last.pt")["step"] == 2
+    assert config_changes(yaml.safe_load((run / "config.yaml").read_text()), config("long")) == []
+    train(config("long"), data, run, resume=True, quiet=True)
+    continued, fresh = (load_checkpoint(r / "checkpoints" / "last.pt") for r in (run, tmp_path / "fresh"))
+    assert continued["step"] == fresh["step"] == 4
+    for part in ("raw_model", "model"):
+        for k, w in fresh[part].items():
+            assert torch.equal(continued[part][k], w), (part, k)
+
+    for target, why in (("other", "more than train.max_steps"), ("long", "exists already")):
+        with pytest.raises(SystemExit) as stop:
+            sys.argv = ["continue_runs.py", str(spec), str(study), "short", target, "--seeds", "0"]
+            tool.main()
+        assert stop.value.code == 2 and why in capsys.readouterr().err
