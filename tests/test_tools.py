@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import json
+import math
 import os
 import subprocess
 import sys
@@ -19,9 +20,17 @@ import torch
 from posecons.checkpoint import load_checkpoint
 
 TOOLS = Path(__file__).resolve().parents[1] / "experiments" / "tools"
-spec = importlib.util.spec_from_file_location("at_steps", TOOLS / "at_steps.py")
-at_steps = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(at_steps)
+
+
+def load_tool(name: str):
+    """experiments/tools/<name>.py as a module (the tools are scripts, not a package)."""
+    load = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
+    tool = importlib.util.module_from_spec(load)
+    load.loader.exec_module(tool)
+    return tool
+
+
+at_steps = load_tool("at_steps")
 
 
 def write_last(run: Path, step: int, mtime: float) -> Path:
@@ -74,9 +83,7 @@ def test_adopt_takes_old_results_only_after_a_rerun_reproduced_one_exactly(tmp_p
     adopts nothing (caught: numbers compared loosely, or the texts compared, which differ by path)."""
     import json
 
-    spec = importlib.util.spec_from_file_location("adopt", TOOLS / "adopt.py")
-    adopt = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(adopt)
+    adopt = load_tool("adopt")
     depth = {"frame": {"scale_cv": 0.07, "abs_rel": 0.23, "predictions": "old/last.pt"}}
     old, rerun, source = tmp_path / "old.json", tmp_path / "rerun.json", tmp_path / "cyc_seed3.json"
     old.write_text(json.dumps({"depth": depth, "pose": {"06": {"ate_full_rmse": 2.5}}}))
@@ -123,9 +130,7 @@ def test_camera_height_scales_each_drive_or_frame_by_its_road_plane(tmp_path):
     from posecons.data.splits import SplitLine
     from posecons.data.synth.rig import Rig
 
-    load = importlib.util.spec_from_file_location("camera_height", TOOLS / "camera_height.py")
-    tool = importlib.util.module_from_spec(load)
-    load.loader.exec_module(tool)
+    tool = load_tool("camera_height")
     (tmp_path / "2011_09_26").mkdir()
     (tmp_path / "2011_09_26" / "calib_cam_to_cam.txt").write_text(format_calib(Rig(384, 128).cam_to_cam_text()))
     k = raw_intrinsics(tmp_path / "2011_09_26", 2)
@@ -157,9 +162,7 @@ def test_extra_emas_follow_their_formula_and_leave_the_trajectory_alone(make_syn
     from posecons.config import load_config
     from tiny import TINY_MODEL
 
-    load = importlib.util.spec_from_file_location("ema_decays", TOOLS / "ema_decays.py")
-    tool = importlib.util.module_from_spec(load)
-    load.loader.exec_module(tool)
+    tool = load_tool("ema_decays")
     data = make_synth(2, 16, 192, 64, 3)
     own, other = 0.9, 0.5
     overrides = [*TINY_MODEL, f"train.ema_decay={own}", "train.max_steps=2", "train.val_every=off", "train.lr=1e-3"]
@@ -208,9 +211,7 @@ def test_median_held_replaces_each_frames_median_by_its_drives_centred_average()
     each frame's log-median replaced by the mean over the centred window within its drive, so the
     factors come back as the geometric moving average; the shape of each map is untouched. Caught: the
     window not centred, running into the next drive, depth and disparity confused, a per-pixel change."""
-    load = importlib.util.spec_from_file_location("test_time_scale", TOOLS / "test_time_scale.py")
-    tool = importlib.util.module_from_spec(load)
-    load.loader.exec_module(tool)
+    tool = load_tool("test_time_scale")
     shape = np.linspace(1.0, 30.0, 16 * 48, dtype=np.float32).reshape(16, 48)
     scale = np.array([1.0, 4.0, 2.0, 0.5, 8.0])
     drives = ["a", "a", "a", "b", "b"]
@@ -234,9 +235,7 @@ def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make
     from posecons.training.trainer import Trainer, train
     from tiny import TINY_MODEL
 
-    load = importlib.util.spec_from_file_location("early_steps", TOOLS / "early_steps.py")
-    tool = importlib.util.module_from_spec(load)
-    load.loader.exec_module(tool)
+    tool = load_tool("early_steps")
     data = make_synth(2, 16, 192, 64, 3)
     base = [*TINY_MODEL, "train.val_every=off", "train.log_every=1", "train.image_every=0", "train.lr=1e-3"]
     per_epoch = Trainer(load_config(overrides=base), data, tmp_path / "count", quiet=True).steps_per_epoch
@@ -263,9 +262,7 @@ def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_i
     4 m third sits at the floor and is the LiDAR's share below it. Caught: the floor's 1.2× ignored,
     the frame's scale inverted, a span of the LiDAR's zeros. A folder that is no study, a missing checkpoint:
     one line each, exit 2, before any output."""
-    load = importlib.util.spec_from_file_location("depth_floor", TOOLS / "depth_floor.py")
-    tool = importlib.util.module_from_spec(load)
-    load.loader.exec_module(tool)
+    tool = load_tool("depth_floor")
     gt = np.zeros((6, 30), np.float32)
     gt[::2, :10], gt[::2, 10:20], gt[::2, 20:] = 4.0, 8.0, 16.0  # every other row has LiDAR
     depth = np.maximum(np.repeat(gt[:1], 6, 0) / 1000, 0.006)[None]
@@ -332,9 +329,7 @@ def test_continue_runs_makes_the_longer_run_of_the_same_seed(make_synth, tmp_pat
     from posecons.training.trainer import train
     from tiny import TINY_MODEL
 
-    load = importlib.util.spec_from_file_location("continue_runs", TOOLS / "continue_runs.py")
-    tool = importlib.util.module_from_spec(load)
-    load.loader.exec_module(tool)
+    tool = load_tool("continue_runs")
     data = make_synth(2, 16, 192, 64)
     synth = {"drives": 2, "frames": 16, "width": 192, "height": 64, "neighbours": 1, "seed": 0}
     common = [*TINY_MODEL, "model.frame_ids=[0,-1,1]", "train.val_every=off", "train.ema_decay=0.5", "train.lr=1e-3"]
@@ -369,3 +364,32 @@ def test_continue_runs_makes_the_longer_run_of_the_same_seed(make_synth, tmp_pat
             sys.argv = ["continue_runs.py", str(spec), str(study), "short", target, "--seeds", "0"]
             tool.main()
         assert stop.value.code == 2 and why in capsys.readouterr().err
+
+
+def test_stabiliser_ratios_recovers_the_ratios_that_made_the_factors():
+    """experiments/tools/stabiliser_ratios.py: factors made by the stabiliser's own chain from ratios
+    that are the true scales' changes plus a bias give back that bias, the same spread and correlation
+    1, and chaining them without the bias lowers σ/μ. Caught: the leak left out of the inversion, the
+    factor multiplying the scale instead of dividing it, drives mixed up."""
+    from posecons.inference.stabilise import ScaleFilter
+
+    tool = load_tool("stabiliser_ratios")
+    rng = np.random.default_rng(0)
+    lines, scales, factors, means = [], [], [], []
+    for drive, bias in (
+        ("2020_01_01/2020_01_01_drive_0006_sync", -0.02),
+        ("2020_01_01/2020_01_01_drive_0007_sync", 0.01),
+    ):
+        log_s = 0.05 * rng.standard_normal(40)
+        chain = ScaleFilter()
+        factors += [1.0] + [chain.step(math.exp(d + bias)) for d in np.diff(log_s)]
+        scales += np.exp(log_s).tolist()
+        lines += [f"{drive} {i} l" for i in range(40)]
+        means.append(bias + np.diff(log_s).mean())
+    plain = {"depth": {"frame": {"scales": scales}}, "test_lines": lines}
+    rows = tool.drive_rows(plain, {"depth": {"frame": {"stabiliser_factors": factors}}})
+    assert [r["drive"][-9:-5] for r in rows] == ["0006", "0007"]
+    for r, mean in zip(rows, means):
+        assert r["bias"] == pytest.approx(mean, abs=1e-9) and r["corr"] == pytest.approx(1, abs=1e-9)
+        assert r["sd_log_r"] == pytest.approx(r["sd_dlog_s"], rel=1e-6)
+        assert r["scale_cv_detrended"] < 0.8 * r["scale_cv"]
