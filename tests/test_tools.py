@@ -393,3 +393,29 @@ def test_stabiliser_ratios_recovers_the_ratios_that_made_the_factors():
         assert r["bias"] == pytest.approx(mean, abs=1e-9) and r["corr"] == pytest.approx(1, abs=1e-9)
         assert r["sd_log_r"] == pytest.approx(r["sd_dlog_s"], rel=1e-6)
         assert r["scale_cv_detrended"] < 0.8 * r["scale_cv"]
+
+
+def test_weight_average_folds_each_new_step_after_the_start_once(tmp_path):
+    """experiments/tools/weight_average.py: the average of the raw weights of the checkpoints after
+    ``after``, each step once, BatchNorm's integer count the newest, and a restart keeps the average.
+    Caught: the EMA averaged instead of the raw weights, a step folded twice, the start step counted,
+    a running mean that weights the newest step 1/2."""
+    tool = load_tool("weight_average")
+    run, out, seen = tmp_path / "study" / "runs" / "long" / "seed3", tmp_path / "average", {}
+    out.mkdir()
+
+    def checkpoint(step: int, mtime: float) -> None:
+        last = run / "checkpoints" / "last.pt"
+        last.parent.mkdir(parents=True, exist_ok=True)
+        raw = {"w": torch.full((2,), float(step)), "bn.num_batches_tracked": torch.tensor(step)}
+        ema = {"w": torch.zeros(2), "bn.num_batches_tracked": torch.tensor(0)}
+        torch.save({"config": {"k": 1}, "model": ema, "raw_model": raw, "step": step}, last)
+        os.utime(last, (mtime, mtime))
+
+    for step, mtime in ((100, 1.0), (200, 2.0), (300, 3.0), (300, 4.0), (600, 5.0)):
+        checkpoint(step, mtime)
+        tool.keep_new(tmp_path / "study", out, "long", 100, seen if step < 600 else {})  # the last: a restart
+    average = load_checkpoint(out / "long_seed3.pt")
+    assert average["averaged_steps"] == [200, 300, 600]
+    assert average["model"]["w"].tolist() == pytest.approx([1100 / 3] * 2, rel=1e-6)
+    assert average["model"]["bn.num_batches_tracked"].item() == 600
