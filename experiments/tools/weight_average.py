@@ -25,6 +25,7 @@ import torch
 from posecons.checkpoint import load_checkpoint
 from posecons.errors import PoseconsError
 from posecons.fileio import atomic_write, write_json
+from posecons.study.report import read_json
 from posecons.study.runner import evaluate_weights, prepare_data, result_name
 from posecons.study.spec import load_spec
 
@@ -71,14 +72,18 @@ def keep_new(study: Path, out: Path, variant: str, after: int, seen: dict[Path, 
 
 
 def evaluate(spec_name: str, study: Path, out: Path) -> None:
-    """Each average → OUT/results/<variant>_seed<k>.json, as the study evaluates a run."""
+    """The average of each finished run → OUT/results/<variant>_seed<k>.json, as the study evaluates a
+    run; an average that missed the run's last step is an error."""
     data = prepare_data(load_spec(spec_name), study)
     for file in sorted(out.glob("*_seed*.pt")):
         match = NAME.fullmatch(file.name)
-        target = out / "results" / result_name(match["variant"], int(match["seed"]))
-        if target.is_file():
+        name = result_name(match["variant"], int(match["seed"]))
+        target, run = out / "results" / name, study / "results" / name
+        if target.is_file() or not run.is_file():  # done before, or the run still trains
             continue
         steps = load_checkpoint(file)["averaged_steps"]
+        if steps[-1] != read_json(run)["steps"]:
+            raise PoseconsError(f"{file}: ends at step {steps[-1]}, its run at {read_json(run)['steps']}")
         result = {"variant": match["variant"], "seed": int(match["seed"]), "steps": steps[-1], "averaged_steps": steps}
         result.update(evaluate_weights(file, data))
         write_json(target, result)
