@@ -1,6 +1,7 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
-once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, early_steps.py, ema_decays.py, scale_components.py and
-test_time_scale.py as their tests say; a folder that is no study is one line and exit status 2."""
+once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, continue_runs.py,
+early_steps.py, ema_decays.py, scale_components.py, stabiliser_ratios.py, test_time_scale.py and
+weight_average.py as their tests say; a folder that is no study is one line and exit status 2."""
 
 from __future__ import annotations
 
@@ -23,7 +24,10 @@ TOOLS = Path(__file__).resolve().parents[1] / "experiments" / "tools"
 
 
 def load_tool(name: str):
-    """experiments/tools/<name>.py as a module (the tools are scripts, not a package)."""
+    """experiments/tools/<name>.py as a module (the tools are scripts, not a package: as when one runs,
+    its folder is on sys.path for the siblings it imports)."""
+    if str(TOOLS) not in sys.path:
+        sys.path.insert(0, str(TOOLS))
     load = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
     tool = importlib.util.module_from_spec(load)
     load.loader.exec_module(tool)

@@ -16,6 +16,7 @@ import argparse
 import re
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import torch
@@ -29,20 +30,17 @@ from posecons.study.spec import load_spec
 NAME = re.compile(r"(?P<variant>.+)_seed(?P<seed>\d+)_step(?P<step>\d+)\.pt")
 
 
-def keep(study: Path, weights: Path, steps: set[int], poll: float = 15.0) -> None:
-    """Until stopped: every ``poll`` seconds, :func:`keep_new`."""
-    seen: dict[Path, float] = {}
+def poll(fold_new, interval: float = 15.0) -> None:
+    """Until stopped: every ``interval`` seconds, call ``fold_new()`` and print what it names."""
     while True:
-        for name in keep_new(study, weights, steps, seen):
-            print(f"{time.strftime('%H:%M:%S')} kept {name}", flush=True)
-        time.sleep(poll)
+        for line in fold_new():
+            print(f"{time.strftime('%H:%M:%S')} {line}", flush=True)
+        time.sleep(interval)
 
 
-def keep_new(study: Path, weights: Path, steps: set[int], seen: dict[Path, float]) -> list[str]:
-    """Copy the weights of each run's ``last.pt`` not ``seen`` at its mtime to
-    WEIGHTS/<variant>_seed<k>_step<N>.pt where N is one of ``steps``; the names of the copies."""
-    kept = []
-    for last in study.glob("runs/*/seed*/checkpoints/last.pt"):
+def new_checkpoints(study: Path, seen: dict[Path, float], variant: str = "*") -> Iterator[tuple[Path, dict]]:
+    """(path, state) of each run's ``last.pt`` (of ``variant``) not ``seen`` at its current mtime."""
+    for last in sorted(study.glob(f"runs/{variant}/seed*/checkpoints/last.pt")):
         try:
             mtime = last.stat().st_mtime
             if seen.get(last) == mtime:
@@ -51,6 +49,14 @@ def keep_new(study: Path, weights: Path, steps: set[int], seen: dict[Path, float
         except (OSError, PoseconsError):  # replaced while being read: the next round reads the new one
             continue
         seen[last] = mtime
+        yield last, state
+
+
+def keep_new(study: Path, weights: Path, steps: set[int], seen: dict[Path, float]) -> list[str]:
+    """Copy the weights of each run's ``last.pt`` not ``seen`` at its mtime to
+    WEIGHTS/<variant>_seed<k>_step<N>.pt where N is one of ``steps``; the names of the copies."""
+    kept = []
+    for last, state in new_checkpoints(study, seen):
         run = last.parent.parent
         target = weights / f"{run.parent.name}_{run.name}_step{state['step']}.pt"
         if state["step"] in steps and not target.exists():
@@ -95,7 +101,8 @@ def main() -> None:
         p.exit(2, f"error: {args.study}: not a study folder (no runs/ in it)\n")
     try:
         if args.command == "keep":
-            keep(args.study, args.weights, set(args.steps))
+            seen: dict[Path, float] = {}
+            poll(lambda: keep_new(args.study, args.weights, set(args.steps), seen))
         else:
             evaluate(args.spec, args.study, args.weights, args.out)
     except PoseconsError as exc:

@@ -17,10 +17,10 @@ from __future__ import annotations
 import argparse
 import re
 import sys
-import time
 from pathlib import Path
 
 import torch
+from at_steps import new_checkpoints, poll  # the sibling tool's watcher of a study's checkpoints
 
 from posecons.checkpoint import load_checkpoint
 from posecons.errors import PoseconsError
@@ -52,15 +52,7 @@ def keep_new(study: Path, out: Path, variant: str, after: int, seen: dict[Path, 
     """Fold each run's ``last.pt`` not ``seen`` at its mtime, if its step is past ``after`` and not in
     the average yet; → '<file> step N' for each fold."""
     folded = []
-    for last in sorted(study.glob(f"runs/{variant}/seed*/checkpoints/last.pt")):
-        try:
-            mtime = last.stat().st_mtime
-            if seen.get(last) == mtime:
-                continue
-            state = load_checkpoint(last)
-        except (OSError, PoseconsError):  # replaced while being read: the next round reads the new one
-            continue
-        seen[last] = mtime
+    for last, state in new_checkpoints(study, seen, variant):
         target = out / f"{variant}_{last.parent.parent.name}.pt"
         average = load_checkpoint(target) if target.is_file() else None
         if state["step"] <= after or (average and state["step"] in average["averaged_steps"]):
@@ -112,10 +104,7 @@ def main() -> None:
             raise PoseconsError(f"{args.study}: not a study folder (no runs/ in it)")
         args.out.mkdir(parents=True, exist_ok=True)
         seen: dict[Path, float] = {}
-        while True:
-            for line in keep_new(args.study, args.out, args.variant, args.after, seen):
-                print(f"{time.strftime('%H:%M:%S')} {line}", flush=True)
-            time.sleep(args.poll)
+        poll(lambda: keep_new(args.study, args.out, args.variant, args.after, seen), args.poll)
     except PoseconsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
