@@ -73,10 +73,12 @@ def evaluate(spec_name: str, study: Path, out: Path) -> None:
         target, run = out / "results" / name, study / "results" / name
         if target.is_file() or not run.is_file():  # done before, or the run still trains
             continue
-        steps = load_checkpoint(file)["averaged_steps"]
-        if steps[-1] != read_json(run)["steps"]:
-            raise PoseconsError(f"{file}: ends at step {steps[-1]}, its run at {read_json(run)['steps']}")
+        steps, trained = load_checkpoint(file)["averaged_steps"], read_json(run)
+        if steps[-1] != trained["steps"]:
+            raise PoseconsError(f"{file}: ends at step {steps[-1]}, its run at {trained['steps']}")
+        # the run's environment: the same trajectory, so the same kind of run (report.run_kind pairs by it)
         result = {"variant": match["variant"], "seed": int(match["seed"]), "steps": steps[-1], "averaged_steps": steps}
+        result["environment"] = trained["environment"]
         result.update(evaluate_weights(file, data))
         write_json(target, result)
         print(f"{target}: σ/μ {result['depth']['frame']['scale_cv']:.4f} ({len(steps)} steps averaged)", flush=True)
