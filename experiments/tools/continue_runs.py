@@ -38,8 +38,9 @@ def continue_run(spec_name: str, study: Path, source: str, target: str, seed: in
         raise PoseconsError(f"{dst}: exists already; the study resumes it as it is")
     wanted = spec.config(target, seed)
     changes = config_changes(yaml.safe_load((src / "config.yaml").read_text()), wanted)
-    if [c.split(":")[0] for c in changes] != [ONLY_CHANGE]:
-        raise PoseconsError(f"{src}: its config differs from {target}'s in more than {ONLY_CHANGE}: {changes}")
+    others = [c for c in changes if c.split(":")[0] != ONLY_CHANGE]
+    if others:
+        raise PoseconsError(f"{src}: its config differs from {target}'s in more than {ONLY_CHANGE}: {others}")
     done = load_checkpoint(src / "checkpoints" / "last.pt")["step"]
     if done >= wanted.train.max_steps:
         raise PoseconsError(f"{src}: already at step {done}, not below {target}'s {wanted.train.max_steps}")
