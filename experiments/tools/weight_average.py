@@ -1,7 +1,8 @@
 """A uniform average of a run's raw weights over the second part of its training (as stochastic weight
 averaging does, Izmailov et al. 2018), made while a study trains and evaluated as the study evaluates
 a run. The recipe's 0.99 EMA averages about the last 100 steps; this averages every checkpoint after
-step AFTER (train.checkpoint_every apart), BatchNorm statistics included, as the EMA does.
+step AFTER (each train.checkpoint_every steps and each epoch's end), BatchNorm statistics included, as
+the EMA does.
 
 ``keep`` polls each runs/VARIANT/seed<k>/checkpoints/last.pt of the study and folds each new step
 after AFTER into OUT/VARIANT_seed<k>.pt (the mean so far and the steps in it), so that it can be
