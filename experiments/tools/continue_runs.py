@@ -17,9 +17,9 @@ from pathlib import Path
 
 import yaml
 
-from posecons.checkpoint import load_checkpoint
 from posecons.errors import PoseconsError
 from posecons.fileio import write_text
+from posecons.study.report import read_json
 from posecons.study.runner import config_changes
 from posecons.study.spec import load_spec
 
@@ -41,7 +41,7 @@ def continue_run(spec_name: str, study: Path, source: str, target: str, seed: in
     others = [c for c in changes if c.split(":")[0] != ONLY_CHANGE]
     if others:
         raise PoseconsError(f"{src}: its config differs from {target}'s in more than {ONLY_CHANGE}: {others}")
-    done = load_checkpoint(src / "checkpoints" / "last.pt")["step"]
+    done = read_json(src / "train_summary.json")["steps"]  # a finished run's last step, without loading last.pt
     if done >= wanted.train.max_steps:
         raise PoseconsError(f"{src}: already at step {done}, not below {target}'s {wanted.train.max_steps}")
     # a temporary name first, so that an interrupted copy is never taken for a run to resume
