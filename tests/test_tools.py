@@ -1,6 +1,6 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
 once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, continue_runs.py,
-early_steps.py, ema_decays.py, scale_components.py, stabiliser_ratios.py, test_time_scale.py and
+early_steps.py, ema_decays.py, residual_regions.py, scale_components.py, stabiliser_ratios.py, test_time_scale.py and
 weight_average.py as their tests say; a folder that is no study is one line and exit status 2."""
 
 from __future__ import annotations
@@ -282,6 +282,35 @@ def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_i
     done = subprocess.run(tool_cmd, capture_output=True, text=True)
     missing = f"error: checkpoint {tmp_path / 'last.pt'} does not exist\n"
     assert (done.returncode, done.stdout, done.stderr) == (2, "", missing)
+
+
+def test_residual_regions_finds_the_region_a_frame_misjudges(tmp_path):
+    """experiments/tools/residual_regions.py on three hand-made frames whose prediction is the LiDAR's
+    depth ÷ 2 (the split's scale) except, in frame 1, the far half (20 m, the crop's upper rows) and, in
+    frame 2, the crop's left fifth, both ÷ 4: those regions' r is +log 2 in their frame's block and
+    every other region's 0, each with its share of the crop's points. Caught: log(pred/gt), the split's
+    median not subtracted, rows and columns swapped, the crop ignored in the fractions. A --block below
+    1: one line, exit 2, before any output."""
+    tool = load_tool("residual_regions")
+    gt = np.zeros((20, 40), np.float32)
+    gt[8:13:2], gt[14:19:2] = 20.0, 5.0  # LiDAR on every other row of the crop (rows 8–18, columns 1–37)
+    disps = np.repeat(2 / np.maximum(gt, 1e-6)[None], 3, 0)
+    disps[1][gt == 20.0] *= 2
+    disps[2][:, :9] *= 2  # columns 1–8: (c − 1) / 37 < 0.2
+    frames = [tool.point_residuals(d, gt) for d in disps]
+    edges = {"column": [0, 0.2, 0.4, 0.6, 0.8, 1.01], "row": [0, 0.25, 0.5, 0.75, 1.01], "depth": [0, 8, 16, np.inf]}
+    table = tool.region_table(frames, 1, edges)
+    r, share = {k: v[..., 0] for k, v in table.items()}, {k: v[..., 1] for k, v in table.items()}
+    np.testing.assert_allclose(np.concatenate([r["column"][0], r["row"][0]]), 0, atol=1e-6)
+    np.testing.assert_allclose(r["depth"][0], [0, np.nan, 0], atol=1e-6)  # no LiDAR point at 8–16 m
+    np.testing.assert_allclose(r["depth"][1], [0, np.nan, math.log(2)], atol=1e-6)
+    np.testing.assert_allclose(r["row"][1][[0, 3]], [math.log(2), 0], atol=1e-6)
+    np.testing.assert_allclose(r["column"][2], [math.log(2), 0, 0, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(r["row"][2], 0, atol=1e-6)
+    assert share["column"][0, 0] == pytest.approx(8 / 37) and share["depth"][0, 2] == pytest.approx(0.5)
+    cmd = [sys.executable, str(TOOLS / "residual_regions.py"), str(tmp_path), str(tmp_path / "last.pt"), "--block", "0"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", "error: --block 0: must be at least 1\n")
 
 
 def test_scale_components_reads_the_raw_weights_when_asked(tmp_path):

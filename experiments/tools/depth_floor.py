@@ -43,19 +43,24 @@ def floor_stats(depths: np.ndarray, gts: Sequence[np.ndarray], min_depth: float)
     }
 
 
+def study_inputs(study: Path, checkpoints: Sequence[Path]) -> tuple[list, list[np.ndarray]]:
+    """The test split and LiDAR maps of a synthetic ``study`` folder, once every checkpoint is found."""
+    if not (study / "gt" / "test_depth.npz").is_file():
+        raise PoseconsError(f"{study}: not a study folder with synthetic data (no gt/test_depth.npz)")
+    for checkpoint in checkpoints:
+        if not checkpoint.is_file():
+            raise PoseconsError(f"checkpoint {checkpoint} does not exist")
+    gts, _ = load_gt(study / "gt" / "test_depth.npz")
+    return read_split(study / "data" / "splits" / "synth" / "test_files.txt"), gts
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("study", type=Path, help="a study folder on synthetic data (data/, gt/test_depth.npz)")
     p.add_argument("checkpoints", nargs="+", type=Path)
     args = p.parse_args()
     try:
-        if not (args.study / "gt" / "test_depth.npz").is_file():
-            raise PoseconsError(f"{args.study}: not a study folder with synthetic data (no gt/test_depth.npz)")
-        for checkpoint in args.checkpoints:
-            if not checkpoint.is_file():
-                raise PoseconsError(f"checkpoint {checkpoint} does not exist")
-        split = read_split(args.study / "data" / "splits" / "synth" / "test_files.txt")
-        gts, _ = load_gt(args.study / "gt" / "test_depth.npz")
+        split, gts = study_inputs(args.study, args.checkpoints)
         print("| checkpoint | min_depth | pixels within 1.2× it | depth span p95/p5 (LiDAR) | LiDAR below the floor |")
         print("|---|---:|---:|---:|---:|")
         for checkpoint in args.checkpoints:
