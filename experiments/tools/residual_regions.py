@@ -2,7 +2,8 @@
 crop, as `evaluate-depth`), r = log(gt / pred) less the median r over the whole test split, so that
 0 is the split's one scale and a frame's log scale is about its points' median r. Printed: the median
 r of each region (image column fifths, four row bands of the crop, LiDAR depth bins), averaged over
-blocks of consecutive frames, with each region's share of the points. A block whose r departs in one
+blocks of the split's lines in order (pick --block so that none straddles two drives; the synthetic
+test drives have 100 frames), with each region's share of the points. A block whose r departs in one
 region only points at what the network misjudges there (experiments/investigation.md §20).
 
     python experiments/tools/residual_regions.py STUDY RUN/checkpoints/last.pt [--block 10] [--depth-bins 8 16 32]
@@ -71,6 +72,8 @@ def main() -> None:
     try:
         if args.block < 1:
             raise PoseconsError(f"--block {args.block}: must be at least 1")
+        if min(args.depth_bins) <= 0 or sorted(set(args.depth_bins)) != args.depth_bins:
+            raise PoseconsError(f"--depth-bins {args.depth_bins}: must be positive and increasing")
         split, gts = study_inputs(args.study, args.checkpoints)
         for checkpoint in args.checkpoints:
             disps = model_disparities(load_predictor(checkpoint, "cpu"), args.study / "data", split)
