@@ -219,6 +219,23 @@ def test_far_rotation_loss_takes_each_sources_rotation_from_the_pose_net_and_not
     assert exchanged["far_rotation"] > 5 * losses["far_rotation"]
 
 
+@pytest.mark.parametrize(
+    "term, settings",
+    [
+        ("cyc", {"loss.constraint_start_step": 5}),
+        ("far_rotation", {"loss.far_rotation_weight": 0.5, "loss.far_rotation_start_step": 5}),
+    ],
+)
+def test_a_term_with_a_start_step_is_left_out_of_the_steps_before_it(term, settings):
+    constraints = ["cyc"] if term == "cyc" else []
+    model = PoseConsModel(make_config(constraints, **settings))
+    batch = random_batch()
+    before = model(batch, step=4)[1]
+    assert term not in before
+    torch.testing.assert_close(before["total"], before["photometric"] + before["smoothness"])
+    assert term in model(batch, step=5)[1]
+
+
 @pytest.mark.parametrize("layout", ["right", "sources_swapped", "samples_transposed"])
 def test_velocity_loss_pairs_each_source_distance_with_its_own_pose(layout):
     """True motion v per frame, sources −1 and +2: the translations are v and 2v long. The batch's

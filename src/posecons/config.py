@@ -82,6 +82,7 @@ RULES: dict[str, Check] = {
     "loss.velocity_weight": _at_least(0),
     "loss.far_rotation_weight": _at_least(0),
     "loss.far_rotation_fraction": _rule(lambda v: 0 < v <= 1, "must be in (0, 1]"),
+    "loss.far_rotation_start_step": _at_least(0),
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
     "data.img_ext": _rule(bool, "must be an extension such as .png"),
@@ -182,6 +183,7 @@ class LossConfig:
     # far_rotation_fraction of pixels by its predicted depth, averaged over the scales at their own sizes
     far_rotation_weight: float = 0.0
     far_rotation_fraction: float = 0.3333
+    far_rotation_start_step: int = 0  # the term counts from this step on, as constraint_start_step
 
 
 @dataclass

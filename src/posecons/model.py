@@ -223,7 +223,7 @@ class PoseConsModel(nn.Module):
                     torch.cat([P.vector(*temporal(f))[1] for f in sources]), d.t().reshape(-1)
                 )
                 terms.append("velocity")
-            if lo.far_rotation_weight > 0:
+            if lo.far_rotation_weight > 0 and step >= lo.far_rotation_start_step:
                 losses["far_rotation"] = self._far_rotation(frames.float(), K, disps, poses)
                 terms.append("far_rotation")
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
