@@ -1,9 +1,9 @@
 """The first training steps of a recipe, step by step: the batch's mean translation of T_{f←0} for
-each source, the disparity's mean and its far-saturated share, and the share of pixels where a
-warped source beats the unwarped one (the auto-mask). A run from scratch settles its direction of
-motion in these steps; for forward driving the translation's z of T_{−n←0} must be positive
-(camera −n is behind), and a run that points it backwards or pins the disparity at the far end
-collapses (experiments/investigation.md §3, §11). The steps run over as many epochs as they need, as
+each source, the disparity's mean and its shares saturated at the far and at the near end, and the
+share of pixels where a warped source beats the unwarped one (the auto-mask). A run from scratch
+settles its direction of motion in these steps; for forward driving the translation's z of T_{−n←0}
+must be positive (camera −n is behind), and a run that points it backwards or pins the disparity at
+either end collapses (experiments/investigation.md §3, §11, §27). The steps run over as many epochs as they need, as
 in training; the first step and every ``--every``-th are printed.
 
     python experiments/tools/early_steps.py --config synth/study --data-path DATA --steps 200 --every 10 --set train.seed=1
@@ -36,7 +36,7 @@ def main() -> None:
     config = load_config(resolve_preset(args.config), args.overrides)
     sources = config.model.frame_ids[1:]
     print("| step | photometric | " + " | ".join(f"t of T_{{{f}←0}} (x, y, z)" for f in sources), end="")
-    print(" | disparity mean | far share | warped share |\n|" + "---|" * (len(sources) + 5))
+    print(" | disparity mean | far share | near share | warped share |\n|" + "---|" * (len(sources) + 6))
     for step, losses, outputs in first_steps(config, args.data_path, args.steps):
         if step == 1 or step % args.every == 0:
             print_row(step, losses, outputs, sources)
@@ -62,7 +62,8 @@ def print_row(step: int, losses: dict, outputs: dict, sources: list[int]) -> Non
     print(
         f"| {step} | {losses['photometric']:.4f} | "
         + " | ".join(", ".join(f"{v:+.2e}" for v in xyz) for xyz in t)
-        + f" | {outputs['disp'][0].mean():.3f} | {signs['far_fraction']:.2f} | {signs['warped_fraction']:.2f} |",
+        + f" | {outputs['disp'][0].mean():.3f} | {signs['far_fraction']:.2f} | {signs['near_fraction']:.2f}"
+        + f" | {signs['warped_fraction']:.2f} |",
         flush=True,
     )
 

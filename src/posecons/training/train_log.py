@@ -1,5 +1,5 @@
 """The run's TensorBoard log, ``RUN/tb/``, which the main rank writes: at step 1 and every
-``train.log_every`` steps the losses, the learning rate of the step and the two signs of a collapse
+``train.log_every`` steps the losses, the learning rate of the step and the signs of a collapse
 (:func:`collapse_signs`); every ``train.image_every`` steps an input frame, its disparity and
 auto-mask; after each validation its finite metrics. Kept apart from the trainer, which says when
 to log and not how, and so that only the main rank imports TensorBoard."""
@@ -48,10 +48,14 @@ def log_validation(writer, step: int, metrics: dict[str, Any]) -> None:
 
 
 def collapse_signs(outputs: dict) -> dict[str, float]:
-    """The two signs of a run collapsing from scratch (experiments/investigation.md §3), from the model's outputs:
-    the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the rest
-    from the loss), and the share of full-scale disparities pinned at the far end (sigmoid < 0.01)."""
+    """The signs of a run collapsing from scratch (experiments/investigation.md §3, §27), from the model's
+    outputs: the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the
+    rest from the loss), and the shares of full-scale disparities pinned at the far end (sigmoid < 0.01)
+    and at the near end (sigmoid > 0.99, every pixel at ``model.min_depth``): a saturated sigmoid passes
+    almost no gradient, so a run pinned at either end stays there."""
+    disp = outputs["disp"][0].detach()
     return {
         "warped_fraction": float(outputs["automask"].float().mean()),
-        "far_fraction": float((outputs["disp"][0].detach() < 0.01).float().mean()),
+        "far_fraction": float((disp < 0.01).float().mean()),
+        "near_fraction": float((disp > 0.99).float().mean()),
     }
