@@ -13,6 +13,7 @@ from posecons.losses import (
     identity_loss,
     min_reprojection,
     photometric_error,
+    saturation_loss,
     smoothness_loss,
     ssim_dissimilarity,
     velocity_loss,
@@ -330,3 +331,16 @@ def test_far_rotation_loss_counts_only_the_farthest_fraction_by_depth():
     assert far_third < 0.002
     assert far_rotation(target, noisy, R[None, None], falling.flip(2), 1 / 3) > 0.05
     assert far_rotation(target, noisy, R[None, None], falling, 1.0) > 10 * far_third
+
+
+def test_saturation_loss_is_zero_inside_the_bound_and_the_squared_excess_beyond_it_averaged_over_scales():
+    inside = [torch.tensor([[-4.5, 0.0], [3.0, 4.5]]).view(1, 1, 2, 2), torch.full((1, 1, 1, 2), -4.0)]
+    assert saturation_loss(inside, 4.6).item() == 0.0
+    fine = torch.tensor([7.6, -6.6, 0.0, 4.6]).view(1, 1, 2, 2).requires_grad_()  # excess 3, 2, 0, 0
+    coarse = torch.tensor([5.6, 1.0]).view(1, 1, 1, 2).requires_grad_()  # excess 1, 0
+    loss = saturation_loss([fine, coarse], 4.6)
+    assert loss.item() == pytest.approx(((9 + 4) / 4 + 1 / 2) / 2, rel=1e-6)
+    loss.backward()
+    # Descent moves each logit beyond the bound back toward it (2·excess / pixels / scales) and no other.
+    torch.testing.assert_close(fine.grad.flatten(), torch.tensor([3.0, -2.0, 0.0, 0.0]) * 2 / 4 / 2)
+    torch.testing.assert_close(coarse.grad.flatten(), torch.tensor([1.0, 0.0]) * 2 / 2 / 2)

@@ -55,12 +55,21 @@ def test_all_pose_inputs_go_through_one_batched_pass():
     assert calls == [18]
 
 
-class ConstantDepth(nn.Module):
+class SigmoidDepth(nn.Module):
+    """Base of the stand-in depth nets: ``disparity(images)`` gives the sigmoid disparities per scale,
+    served as the model asks for them (DepthNet's ``logits`` option)."""
+
+    def forward(self, images, logits=False):
+        disps = self.disparity(images)
+        return {s: torch.logit(d) for s, d in disps.items()} if logits else disps
+
+
+class ConstantDepth(SigmoidDepth):
     def __init__(self, sigmoid_value: float):
         super().__init__()
         self.value = sigmoid_value
 
-    def forward(self, images):
+    def disparity(self, images):
         b, _, h, w = images.shape
         return {s: torch.full((b, 1, h // 2**s, w // 2**s), self.value) for s in range(4)}
 
@@ -219,6 +228,33 @@ def test_far_rotation_loss_takes_each_sources_rotation_from_the_pose_net_and_not
     assert exchanged["far_rotation"] > 5 * losses["far_rotation"]
 
 
+@pytest.mark.parametrize("end", [10.0, -10.0])
+def test_the_saturation_wall_pushes_a_disparity_pinned_at_either_end_back_where_the_sigmoid_would_not(end):
+    """The real depth net with its disparity heads pinned at one end (every logit ±10): the wall adds
+    its weight × (10 − 4.6)² to the total, and the heads' biases get 2 · 5.4 / 4 scales toward the
+    range from it; without the wall the sigmoid passes them almost nothing."""
+    grads = {}
+    for weight in (0.0, 0.5):
+        torch.manual_seed(0)
+        model = PoseConsModel(make_config(**{"loss.saturation_weight": weight}))
+        for conv in model.depth_net.decoder.disp_convs.values():
+            nn.init.zeros_(conv[1].weight)
+            nn.init.constant_(conv[1].bias, end)
+        losses = model(random_batch())[1]
+        if weight:
+            assert losses["saturation"].item() == pytest.approx(5.4**2, rel=1e-5)
+            expected = losses["photometric"] + losses["smoothness"] + weight * losses["saturation"]
+            torch.testing.assert_close(losses["total"], expected)
+        else:
+            assert "saturation" not in losses
+        losses["total"].backward()
+        grads[weight] = torch.stack([conv[1].bias.grad[0] for conv in model.depth_net.decoder.disp_convs.values()])
+    assert grads[0.0].abs().max() < 1e-3
+    torch.testing.assert_close(
+        grads[0.5], torch.full((4,), 0.5 * 2 * 5.4 / 4 * (1 if end > 0 else -1)), atol=1e-3, rtol=0
+    )
+
+
 @pytest.mark.parametrize(
     "term, settings",
     [
@@ -370,10 +406,10 @@ def test_networks_see_net_frames_and_losses_the_unaugmented_frames():
     assert torch.equal(plain["photometric"], augmented["photometric"])
 
 
-class DepthFromImage(nn.Module):
+class DepthFromImage(SigmoidDepth):
     """A depth net whose sigmoid output is the input image's first channel, at every scale."""
 
-    def forward(self, images):
+    def disparity(self, images):
         return {s: torch.nn.functional.avg_pool2d(images[:, :1], 2**s) for s in range(4)}
 
 
@@ -458,7 +494,7 @@ def test_constraint_losses_are_over_the_whole_batch_bit_for_bit():
     assert torch.equal(torch.get_rng_state(), rng_after)
 
 
-class PlaneDepth(nn.Module):
+class PlaneDepth(SigmoidDepth):
     """A depth net that recognises each image as one of the known frames and returns its true depth
     (a fronto-parallel plane: one depth per frame), as disparity at every scale."""
 
@@ -466,7 +502,7 @@ class PlaneDepth(nn.Module):
         super().__init__()
         self.keys, self.ids, self.depths = frames.reshape(-1, *frames.shape[-3:]), list(frame_ids) * len(frames), depths
 
-    def forward(self, images):
+    def disparity(self, images):
         found = (images.float()[:, None] - self.keys[None]).abs().mean((2, 3, 4)).argmin(1)
         disp = torch.tensor([sigmoid_for_depth(self.depths[self.ids[i]]) for i in found.tolist()])
         return {s: disp.view(-1, 1, 1, 1).expand(-1, 1, H // 2**s, W // 2**s).clone() for s in range(4)}

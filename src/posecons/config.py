@@ -83,6 +83,8 @@ RULES: dict[str, Check] = {
     "loss.far_rotation_weight": _at_least(0),
     "loss.far_rotation_fraction": _rule(lambda v: 0 < v <= 1, "must be in (0, 1]"),
     "loss.far_rotation_start_step": _at_least(0),
+    "loss.saturation_weight": _at_least(0),
+    "loss.saturation_bound": _POSITIVE,
     "data.dataset": _one_of("kitti_raw", "kitti_odom"),
     "data.split": _rule(bool, "must name a split"),
     "data.img_ext": _rule(bool, "must be an extension such as .png"),
@@ -184,6 +186,11 @@ class LossConfig:
     far_rotation_weight: float = 0.0
     far_rotation_fraction: float = 0.3333
     far_rotation_start_step: int = 0  # the term counts from this step on, as constraint_start_step
+    # A wall on the depth net's disparity logits (losses.saturation_loss; not in the paper): weight ×
+    # the mean squared excess beyond ±saturation_bound (4.6: the sigmoid's 0.01 and 0.99), so that a
+    # disparity driven to either end of its range is not pinned there by a vanishing gradient
+    saturation_weight: float = 0.0
+    saturation_bound: float = 4.6
 
 
 @dataclass

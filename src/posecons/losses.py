@@ -188,3 +188,13 @@ def far_rotation_loss(
     warped = warp(sources.flatten(0, 1), depth.repeat_interleave(s, 0), T, K.repeat_interleave(s, 0))
     error = photometric_error(warped, target.repeat_interleave(s, 0), ssim_weight).view(b, s, *depth.shape[-2:])
     return (error * far).sum() / (far.sum() * s)
+
+
+def saturation_loss(logits: list[torch.Tensor], bound: float) -> torch.Tensor:
+    """Mean squared excess of the disparity logits beyond ±``bound``, averaged over the scales (not in
+    the paper). Zero while every sigmoid lies in (σ(−bound), σ(bound)); beyond, a gradient back toward
+    the range where the sigmoid's own has vanished. A run whose disparity reaches either end of the
+    sigmoid stays pinned there (experiments/investigation.md §26, §27); this keeps it movable.
+
+    logits: one (B, 1, H, W) tensor per scale; bound > 0."""
+    return torch.stack([F.relu(x.abs() - bound).square().mean() for x in logits]).mean()

@@ -33,6 +33,7 @@ from .losses import (
     identity_loss,
     min_reprojection,
     photometric_error,
+    saturation_loss,
     smoothness_loss,
     velocity_loss,
 )
@@ -159,11 +160,12 @@ class PoseConsModel(nn.Module):
             lo.depth_consistency_weight > 0 or lo.skip_weight > 0
         ):  # target and sources in one pass: their depth is needed too
             b = frames.shape[0]
-            all_disps = self.depth_net(torch.cat([net_frames[:, i] for i in range(len(m.frame_ids))]))
-            disps = {s: d[:b] for s, d in all_disps.items()}
-            source_disp = all_disps[0][b:]  # (S·B, 1, H, W), the sources in frame_ids order
+            all_logits = self.depth_net(torch.cat([net_frames[:, i] for i in range(len(m.frame_ids))]), logits=True)
+            logits = {s: x[:b] for s, x in all_logits.items()}
+            source_disp = torch.sigmoid(all_logits[0][b:])  # (S·B, 1, H, W), the sources in frame_ids order
         else:
-            disps = self.depth_net(net_frames[:, 0])
+            logits = self.depth_net(net_frames[:, 0], logits=True)
+        disps = {s: torch.sigmoid(x) for s, x in logits.items()}
 
         sources = m.frame_ids[1:]
         motions = None
@@ -226,9 +228,12 @@ class PoseConsModel(nn.Module):
             if lo.far_rotation_weight > 0 and step >= lo.far_rotation_start_step:
                 losses["far_rotation"] = self._far_rotation(frames.float(), K, disps, poses)
                 terms.append("far_rotation")
+            if lo.saturation_weight > 0:
+                losses["saturation"] = saturation_loss(list(logits.values()), lo.saturation_bound)
+                terms.append("saturation")
             weights = {"fb": lo.fb_weight, "id": lo.id_weight, "cyc": lo.cyc_weight}
             weights.update(dc=lo.depth_consistency_weight, skip=lo.skip_weight, velocity=lo.velocity_weight)
-            weights.update(far_rotation=lo.far_rotation_weight)
+            weights.update(far_rotation=lo.far_rotation_weight, saturation=lo.saturation_weight)
             losses["total"] = losses["total"] + sum(weights[c] * losses[c] for c in terms)
 
         outputs = {

@@ -250,7 +250,7 @@ class Conv3x3(nn.Sequential):
 
 
 class DepthDecoder(nn.Module):
-    """U-Net decoder: returns sigmoid disparities ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale."""
+    """U-Net decoder: returns disparity logits ``{s: (B, 1, H/2^s, W/2^s)}`` for each scale (fp32)."""
 
     def __init__(self, num_ch_enc: list[int], scales: tuple[int, ...] = (0, 1, 2, 3)):
         super().__init__()
@@ -273,7 +273,7 @@ class DepthDecoder(nn.Module):
                 x = torch.cat([x, feats[i - 1]], 1)
             x = self.up_out[i](x)
             if i in self.scales:
-                out[i] = torch.sigmoid(fp32_output(self.disp_convs[str(i)], x))
+                out[i] = fp32_output(self.disp_convs[str(i)], x)
         return out
 
 
@@ -300,15 +300,16 @@ class PoseDecoder(nn.Module):
 
 
 class DepthNet(nn.Module):
-    """One RGB frame (B, 3, H, W) → sigmoid disparities per scale."""
+    """One RGB frame (B, 3, H, W) → sigmoid disparities per scale, or their logits (``logits=True``)."""
 
     def __init__(self, num_layers: int = 18, imagenet: dict | None = None, scales=(0, 1, 2, 3)):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet)
         self.decoder = DepthDecoder(self.encoder.num_ch_enc, scales)
 
-    def forward(self, images: torch.Tensor) -> dict[int, torch.Tensor]:
-        return self.decoder(self.encoder(images))
+    def forward(self, images: torch.Tensor, logits: bool = False) -> dict[int, torch.Tensor]:
+        out = self.decoder(self.encoder(images))
+        return out if logits else {s: torch.sigmoid(x) for s, x in out.items()}
 
 
 # (axis-angle, translation) sign changes of a motion seen in the mirror image (x ↦ −x).
