@@ -260,6 +260,30 @@ def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make
     assert (done.returncode, done.stdout, done.stderr) == (2, "", "error: --every: must be at least 1, got 0\n")
 
 
+def test_early_steps_late_switches_a_loss_setting_on_at_its_step_of_the_same_run(make_synth):
+    """early_steps.py --late N KEY=VALUE: the steps before N equal the run without it and lack the
+    term; from step N on the term is in the loss. Caught: switched one step early or late, the switch
+    rebuilding the run. A step below 1 or a setting outside loss.*: one line, exit 2."""
+    from posecons.config import load_config
+    from tiny import TINY_MODEL
+
+    tool = load_tool("early_steps")
+    data = make_synth(2, 12, 192, 64, 3)
+    base = [*TINY_MODEL, "train.val_every=off", "train.image_every=0", "train.lr=1e-3"]
+    plain = [(step, losses) for step, losses, _ in tool.first_steps(load_config(overrides=base), data, 3)]
+    late = (2, load_config(overrides=[*base, "loss.far_rotation_weight=1"]))
+    switched = [(step, losses) for step, losses, _ in tool.first_steps(load_config(overrides=base), data, 3, late)]
+    assert switched[0][1]["total"] == plain[0][1]["total"] and "far_rotation" not in switched[0][1]
+    assert [("far_rotation" in losses) for _, losses in switched[1:]] == [True, True]
+    assert switched[1][1]["photometric"] == plain[1][1]["photometric"]  # the same weights until then
+    assert switched[1][1]["total"] > plain[1][1]["total"]
+    tool_cmd = [sys.executable, str(TOOLS / "early_steps.py"), "--config", "synth/study", "--data-path", str(data)]
+    for bad in (["0", "loss.saturation_weight=1"], ["5", "train.lr=1"]):
+        done = subprocess.run([*tool_cmd, "--late", *bad], capture_output=True, text=True)
+        assert (done.returncode, done.stdout) == (2, "")
+        assert done.stderr == "error: --late: one STEP ≥ 1 for every override, and loss settings only\n"
+
+
 def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_it(tmp_path):
     """experiments/tools/depth_floor.py on a hand-made frame: LiDAR at 4, 8 and 16 m on thirds of the
     image, the prediction the truth ÷ 1000 but clipped at a floor of 0.006 (6 m at that scale): the

@@ -7,6 +7,9 @@ either end collapses (experiments/investigation.md §3, §11, §27). The steps r
 in training; the first step and every ``--every``-th are printed.
 
     python experiments/tools/early_steps.py --config synth/study --data-path DATA --steps 200 --every 10 --set train.seed=1
+
+``--late N KEY=VALUE`` switches a loss setting on at step N of the same run, e.g. to ask whether a run
+already pinned at one end of the disparity comes back (lab log §28).
 """
 
 from __future__ import annotations
@@ -29,25 +32,42 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=60, help="training steps, over as many epochs as they need")
     p.add_argument("--every", type=int, default=1, help="print every N-th step (and the first)")
     add_overrides(p, "a config override such as train.warmup_steps=0")
+    p.add_argument(
+        "--late",
+        nargs=2,
+        action="append",
+        default=[],
+        metavar=("STEP", "KEY=VALUE"),
+        help="a loss override that takes effect from STEP on (repeatable, one STEP for all)",
+    )
     args = p.parse_args()
     for name in ("steps", "every"):
         if getattr(args, name) < 1:
             p.exit(2, f"error: --{name}: must be at least 1, got {getattr(args, name)}\n")
     config = load_config(resolve_preset(args.config), args.overrides)
+    late = None
+    if args.late:
+        at = {int(step) for step, _ in args.late}
+        if len(at) != 1 or min(at) < 1 or any(not kv.startswith("loss.") for _, kv in args.late):
+            p.exit(2, "error: --late: one STEP ≥ 1 for every override, and loss settings only\n")
+        late = (at.pop(), load_config(resolve_preset(args.config), args.overrides + [kv for _, kv in args.late]))
     sources = config.model.frame_ids[1:]
     print("| step | photometric | " + " | ".join(f"t of T_{{{f}←0}} (x, y, z)" for f in sources), end="")
     print(" | disparity mean | far share | near share | warped share |\n|" + "---|" * (len(sources) + 6))
-    for step, losses, outputs in first_steps(config, args.data_path, args.steps):
+    for step, losses, outputs in first_steps(config, args.data_path, args.steps, late):
         if step == 1 or step % args.every == 0:
             print_row(step, losses, outputs, sources)
 
 
-def first_steps(config, data_path: str, steps: int):
-    """(step, losses, outputs) of the first ``steps`` training steps, as ``posecons train`` takes them."""
+def first_steps(config, data_path: str, steps: int, late=None):
+    """(step, losses, outputs) of the first ``steps`` training steps, as ``posecons train`` takes them;
+    ``late`` = (N, config): the model's losses follow that config from step N on."""
     with tempfile.TemporaryDirectory() as out:
         trainer = Trainer(config, data_path, Path(out) / "run", quiet=True)
         for epoch in itertools.count():
             for batch in trainer._loader(epoch, 0):
+                if late and trainer.step + 1 == late[0]:
+                    trainer.model.config = late[1]
                 losses, outputs = trainer._micro_step(batch, last=True)
                 trainer.step += 1
                 yield trainer.step, losses, outputs
