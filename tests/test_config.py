@@ -52,6 +52,8 @@ def test_preset_with_base_and_overrides(tmp_path):
         ("model.pose_rotation_scale=0", "model.pose_rotation_scale must be > 0"),
         ("loss.far_rotation_fraction=0", r"loss.far_rotation_fraction must be in \(0, 1\]"),
         ("loss.far_rotation_start_step=-1", "loss.far_rotation_start_step must be ≥ 0, got -1"),
+        ("loss.saturation_weight=-1", "loss.saturation_weight must be ≥ 0, got -1"),
+        ("loss.saturation_bound=0", "loss.saturation_bound must be > 0"),
         ("train.val_every=-5", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.val_every=weekly", 'train.val_every must be a number of steps ≥ 1, "epoch"'),
         ("train.ema_decay=-0.1", r"^train.ema_decay must be in \[0, 1\), got -0.1$"),
