@@ -263,7 +263,8 @@ def test_early_steps_takes_the_steps_of_training_across_epochs_and_lr_decay(make
 def test_early_steps_late_switches_a_loss_setting_on_at_its_step_of_the_same_run(make_synth):
     """early_steps.py --late N KEY=VALUE: the steps before N equal the run without it and lack the
     term; from step N on the term is in the loss. Caught: switched one step early or late, the switch
-    rebuilding the run. A step below 1 or a setting outside loss.*: one line, exit 2."""
+    rebuilding the run. A step below 1 or not a number, a setting outside loss.*, an unknown key: one
+    line, exit 2."""
     from posecons.config import load_config
     from tiny import TINY_MODEL
 
@@ -278,10 +279,13 @@ def test_early_steps_late_switches_a_loss_setting_on_at_its_step_of_the_same_run
     assert switched[1][1]["photometric"] == plain[1][1]["photometric"]  # the same weights until then
     assert switched[1][1]["total"] > plain[1][1]["total"]
     tool_cmd = [sys.executable, str(TOOLS / "early_steps.py"), "--config", "synth/study", "--data-path", str(data)]
-    for bad in (["0", "loss.saturation_weight=1"], ["5", "train.lr=1"]):
+    for bad in (["0", "loss.saturation_weight=1"], ["x", "loss.saturation_weight=1"], ["5", "train.lr=1"]):
         done = subprocess.run([*tool_cmd, "--late", *bad], capture_output=True, text=True)
         assert (done.returncode, done.stdout) == (2, "")
         assert done.stderr == "error: --late: one STEP ≥ 1 for every override, and loss settings only\n"
+    done = subprocess.run([*tool_cmd, "--late", "5", "loss.nope=1"], capture_output=True, text=True)
+    assert (done.returncode, done.stdout) == (2, "") and done.stderr.startswith("error: unknown config key 'loss.nope'")
+    assert len(done.stderr.splitlines()) == 1
 
 
 def test_depth_floor_counts_the_pixels_at_the_floor_and_the_lidar_points_below_it(tmp_path):

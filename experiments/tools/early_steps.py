@@ -3,8 +3,8 @@ each source, the disparity's mean and its shares saturated at the far and at the
 share of pixels where a warped source beats the unwarped one (the auto-mask). A run from scratch
 settles its direction of motion in these steps; for forward driving the translation's z of T_{−n←0}
 must be positive (camera −n is behind), and a run that points it backwards or pins the disparity at
-either end collapses (experiments/investigation.md §3, §11, §27). The steps run over as many epochs as they need, as
-in training; the first step and every ``--every``-th are printed.
+either end collapses (experiments/investigation.md §3, §11, §27). The steps run over as many epochs
+as they need, as in training; the first step and every ``--every``-th are printed.
 
     python experiments/tools/early_steps.py --config synth/study --data-path DATA --steps 200 --every 10 --set train.seed=1
 
@@ -21,6 +21,7 @@ from pathlib import Path
 
 from posecons.cli import add_overrides
 from posecons.config import load_config, resolve_preset
+from posecons.errors import PoseconsError
 from posecons.training.train_log import collapse_signs
 from posecons.training.trainer import Trainer
 
@@ -44,13 +45,24 @@ def main() -> None:
     for name in ("steps", "every"):
         if getattr(args, name) < 1:
             p.exit(2, f"error: --{name}: must be at least 1, got {getattr(args, name)}\n")
-    config = load_config(resolve_preset(args.config), args.overrides)
-    late = None
-    if args.late:
-        at = {int(step) for step, _ in args.late}
-        if len(at) != 1 or min(at) < 1 or any(not kv.startswith("loss.") for _, kv in args.late):
-            p.exit(2, "error: --late: one STEP ≥ 1 for every override, and loss settings only\n")
-        late = (at.pop(), load_config(resolve_preset(args.config), args.overrides + [kv for _, kv in args.late]))
+    at = {step for step, _ in args.late}
+    if args.late and (
+        len(at) != 1
+        or not min(at).isdigit()
+        or int(min(at)) < 1
+        or any(not kv.startswith("loss.") for _, kv in args.late)
+    ):
+        p.exit(2, "error: --late: one STEP ≥ 1 for every override, and loss settings only\n")
+    try:
+        config = load_config(resolve_preset(args.config), args.overrides)
+        late = None
+        if args.late:
+            late = (
+                int(at.pop()),
+                load_config(resolve_preset(args.config), args.overrides + [kv for _, kv in args.late]),
+            )
+    except PoseconsError as exc:
+        p.exit(2, f"error: {exc}\n")
     sources = config.model.frame_ids[1:]
     print("| step | photometric | " + " | ".join(f"t of T_{{{f}←0}} (x, y, z)" for f in sources), end="")
     print(" | disparity mean | far share | near share | warped share |\n|" + "---|" * (len(sources) + 6))
