@@ -181,8 +181,9 @@ def test_the_recommended_preset_is_the_measured_setting_on_the_paper_baseline():
     added = {k: v for k, v in _flat(study).items() if _flat(study_baseline)[k] != v}
     added.pop("train.max_steps")
     added["train.ema_decay"] = study.train.ema_decay  # in both study runs; the baseline preset has none
-    baseline, recommended = _flat(load_config(resolve_preset("kitti/baseline"))), _flat(
-        load_config(resolve_preset("kitti/recommended"))
+    baseline, recommended = (
+        _flat(load_config(resolve_preset("kitti/baseline"))),
+        _flat(load_config(resolve_preset("kitti/recommended"))),
     )
     assert {k: v for k, v in recommended.items() if baseline[k] != v} == added
     assert added.keys() == {
