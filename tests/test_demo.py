@@ -6,7 +6,8 @@ import json
 import pytest
 import torch
 
-from posecons.training.demo import run_demo
+from posecons.config import load_config, resolve_preset
+from posecons.training.demo import recipe, run_demo
 from posecons.training.precision import resolve_precision
 
 pytestmark = pytest.mark.slow
@@ -26,7 +27,8 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
     # The preset's precision "auto", resolved for this CPU, is recorded and reported.
     assert saved["precision"] == resolve_precision("auto", torch.device("cpu"))[0]
     assert f"with precision {saved['precision']}" in report
-    assert "| untrained |" in report and "| trained (cyc) |" in report and "constant velocity" in report
+    assert "| untrained |" in report and f"| trained ({recipe(saved['config'])[0]}) |" in report
+    assert "constant velocity" in report
     # The stabilised row is the same predictions × the stabiliser's factors, not a copy of the plain row.
     stable = json.loads((out / "eval" / "depth_stabilised.json").read_text())
     assert stable["scale_cv"] == saved["scale_cv_stabilised"] != saved["scale_cv"]
@@ -44,3 +46,32 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
     ):
         assert (out / "plots" / plot).stat().st_size > 1000
         assert f"plots/{plot}" in report
+
+
+@pytest.mark.parametrize(
+    "sets,label,words",
+    [
+        (["loss.constraints=[cyc]", "train.ema_decay=0"], "cyc", "the cycle constraint"),
+        (
+            ["loss.constraints=[]", "loss.far_rotation_weight=0", "loss.saturation_weight=0", "train.ema_decay=0"],
+            "baseline",
+            "no pose constraint",
+        ),
+        (
+            [
+                "loss.constraints=[fb,id]",
+                "loss.far_rotation_weight=1",
+                "loss.saturation_weight=1",
+                "train.ema_decay=0.99",
+            ],
+            "fb, id, far rotation, wall, EMA",
+            "the forward-backward constraint, the identity constraint, the far pixels' rotation (rotation factor 0.01), "
+            "the wall on the disparity logits, a weight EMA of decay 0.99",
+        ),
+    ],
+)
+def test_the_report_names_what_the_run_trained_with(sets, label, words):
+    """The report's row and sentence come from the run's config, so a changed preset or --set cannot
+    leave them naming another recipe."""
+    config = load_config(resolve_preset("synth/demo"), sets).to_dict()
+    assert recipe(config)[0] == label and recipe(config)[1].startswith(words)

@@ -1,4 +1,4 @@
-"""`make demo`: synthetic KITTI-format data → CPU training with the cycle constraint → evaluation
+"""`make demo`: synthetic KITTI-format data → CPU training (the synth/demo preset) → evaluation
 → ``report.md`` (with plots) and ``summary.json``.
 
 A short script over the library functions the commands also call: ``generate_synth``, ``export_gt``,
@@ -26,6 +26,27 @@ from .trainer import train
 
 # The demo's synthetic data set: small frames keep decoding cheap on a 2-core CPU.
 SYNTH = {"drives": 6, "frames": 120, "width": 384, "height": 128, "neighbours": 3}
+
+
+_CONSTRAINTS = {"id": "identity", "fb": "forward-backward", "cyc": "cycle"}
+
+
+def recipe(config: dict) -> tuple[str, str]:
+    """What a run's ``config`` (``Config.to_dict()``) trains with beyond Monodepth2's losses: a short
+    label for the report's table and the same in words."""
+    loss, train = config["loss"], config["train"]
+    parts = [(c, f"the {_CONSTRAINTS[c]} constraint") for c in loss["constraints"]]
+    if loss["far_rotation_weight"] > 0:
+        parts.append(
+            ("far rotation", f"the far pixels' rotation (rotation factor {config['model']['pose_rotation_scale']})")
+        )
+    if loss["saturation_weight"] > 0:
+        parts.append(("wall", "the wall on the disparity logits"))
+    if train["ema_decay"] > 0:
+        parts.append(("EMA", f"a weight EMA of decay {train['ema_decay']}"))
+    if not parts:
+        return "baseline", "no pose constraint (Monodepth2's losses only)"
+    return ", ".join(label for label, _ in parts), ", ".join(words for _, words in parts)
 
 
 def _read_jsonl(path: Path) -> list[dict]:
@@ -58,7 +79,7 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     before = evaluate.checkpoint_depth(untrained, data, test_split, gt)["frame"]
     write_json(ev / "depth_untrained.json", before)
 
-    print("[3/5] training (synth/demo preset, cycle constraint) on the CPU", flush=True)
+    print(f"[3/5] training (synth/demo preset: {recipe(config.to_dict())[1]}) on the CPU", flush=True)
     shutil.rmtree(run, ignore_errors=True)
     train_start = time.time()
     trained = train(config, data, run, accelerator="cpu")
@@ -119,15 +140,20 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
 def _report(s: dict, depth: dict, before: dict, stable: dict, pose: dict, seq: str, meta: dict) -> str:
     cv = pose["const_velocity"]
     m, t = s["config"]["model"], s["config"]["train"]
+    label, words = recipe(s["config"])
     rows = [
         [name, *result_cells(r, scale_format=".4f")]
-        for name, r in (("untrained", before), ("trained (cyc)", depth), ("trained + `predict --stabilise`", stable))
+        for name, r in (
+            ("untrained", before),
+            (f"trained ({label})", depth),
+            ("trained + `predict --stabilise`", stable),
+        )
     ]
     return f"""# posecons demo report
 
 Synthetic KITTI-format data (seed {meta.get("seed")}, {len(meta.get("drives", []))} drives), ResNet-{m["num_layers"]}
-at {m["width"]}×{m["height"]}, batch {t["batch_size"]}, lr {t["lr"]}, {t["max_steps"]} steps with the **cycle**
-constraint, trained on the CPU in {s["train_minutes"]:.1f} min with precision {s["precision"]} (whole demo {s["minutes"]:.1f} min).
+at {m["width"]}×{m["height"]}, batch {t["batch_size"]}, lr {t["lr"]}, {t["max_steps"]} steps with {words},
+trained on the CPU in {s["train_minutes"]:.1f} min with precision {s["precision"]} (whole demo {s["minutes"]:.1f} min).
 Evaluated: {checkpoint_note(s["checkpoint"])}.
 Test: the held-out drives' `test_files.txt`, LiDAR ground truth, Garg crop, per-frame median scaling.
 
