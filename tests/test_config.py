@@ -1,3 +1,4 @@
+import json
 import re
 from pathlib import Path
 
@@ -192,3 +193,31 @@ def test_the_recommended_preset_is_the_measured_setting_on_the_paper_baseline():
         "loss.saturation_weight",
         "train.ema_decay",
     }
+
+
+def test_the_presets_still_train_every_committed_study_run():
+    """Every committed study run (docs/results/**/<variant>_seed<k>.json beside its study.json) records
+    its resolved config; today's preset with the run's own overrides must resolve to it, and an option
+    added since must sit at a default that leaves the run as it was. A preset edited under the studies
+    (synth/study extends the demo's preset) fails here instead of silently changing what every spec's
+    variants mean."""
+    defaults, checked = _flat(load_config()), 0
+    for study in sorted((REPO / "docs/results").rglob("study.json")):
+        preset = resolve_preset(json.loads(study.read_text())["preset"])
+        for run in sorted(study.parent.glob("*_seed*.json")):
+            record = json.loads(run.read_text())
+            if "overrides" not in record:  # a reference that is not a training run (the renderer's depth)
+                continue
+            try:
+                today = _flat(load_config(preset, record["overrides"]))
+            except PoseconsError:  # an option removed since (experiments/README.md names its commit)
+                continue
+            stored = {
+                f"{part}.{key}": v
+                for part, values in without_retired(record["config"]).items()
+                for key, v in values.items()
+            }
+            wrong = {k: (stored.get(k, defaults[k]), v) for k, v in today.items() if stored.get(k, defaults[k]) != v}
+            assert not wrong, f"{run.relative_to(REPO)}: recorded vs today {wrong}"
+            checked += 1
+    assert checked > 300
