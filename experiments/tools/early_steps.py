@@ -45,22 +45,14 @@ def main() -> None:
     for name in ("steps", "every"):
         if getattr(args, name) < 1:
             p.exit(2, f"error: --{name}: must be at least 1, got {getattr(args, name)}\n")
-    at = {step for step, _ in args.late}
-    if args.late and (
-        len(at) != 1
-        or not min(at).isdigit()
-        or int(min(at)) < 1
-        or any(not kv.startswith("loss.") for _, kv in args.late)
-    ):
+    steps = {step for step, _ in args.late}
+    step = steps.pop() if len(steps) == 1 else ""
+    if args.late and not (step.isdigit() and int(step) >= 1 and all(kv.startswith("loss.") for _, kv in args.late)):
         p.exit(2, "error: --late: one STEP ≥ 1 for every override, and loss settings only\n")
     try:
         config = load_config(resolve_preset(args.config), args.overrides)
-        late = None
-        if args.late:
-            late = (
-                int(at.pop()),
-                load_config(resolve_preset(args.config), args.overrides + [kv for _, kv in args.late]),
-            )
+        late_overrides = args.overrides + [kv for _, kv in args.late]
+        late = (int(step), load_config(resolve_preset(args.config), late_overrides)) if args.late else None
     except PoseconsError as exc:
         p.exit(2, f"error: {exc}\n")
     sources = config.model.frame_ids[1:]
