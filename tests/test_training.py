@@ -18,7 +18,7 @@ from posecons.cli import main as cli
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
 from posecons.training import run_dir as run_dir_module
-from posecons.training.train_log import collapse_signs
+from posecons.training.collapse import collapse_signs
 from posecons.training.trainer import Trainer, train
 from tiny import TINY_MODEL
 
@@ -276,17 +276,6 @@ def test_resume_falls_back_to_the_previous_state_when_last_does_not_load(synth_d
     last.with_name("last.prev.pt").unlink()  # nothing to fall back to: the error names last.pt
     with pytest.raises(PoseconsError, match=f"{last}: not a readable checkpoint"):
         train(tiny_config("train.max_steps=4", *sets), synth_data, run, resume=True, quiet=True)
-
-
-def test_collapse_signs_count_warped_pixels_and_pinned_disparities_at_each_end():
-    disp = torch.full((2, 1, 4, 4), 0.5)
-    disp[0, 0, 0] = 0.005  # 4 of 32 pixels pinned at the far end (small sigmoid = small disparity = far)
-    disp[1, 0, 1, :2] = 0.995  # 2 of 32 pinned at the near end
-    disp[1, 0, 2, :3] = 0.985  # near, but not pinned: neither end counts them
-    automask = torch.zeros(2, 4, 4, dtype=torch.bool)
-    automask[:, :3] = True  # a warped source won on 24 of 32 pixels
-    signs = collapse_signs({"disp": {0: disp}, "automask": automask})
-    assert signs == {"warped_fraction": 0.75, "far_fraction": 0.125, "near_fraction": 0.0625}
 
 
 def metrics_at_best(run: Path, key: str) -> float:

@@ -22,7 +22,7 @@ from pathlib import Path
 from posecons.cli import add_overrides
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
-from posecons.training.train_log import collapse_signs
+from posecons.training.collapse import collapse_signs
 from posecons.training.trainer import Trainer
 
 

@@ -1,4 +1,5 @@
-"""One exception type for bad user input, so the CLI can print it without a traceback."""
+"""The exceptions the CLI prints as one line without a traceback: bad user input (exit 2), an
+interrupt (128 + the signal) and a collapsed run (1)."""
 
 
 class PoseconsError(Exception):
@@ -11,3 +12,10 @@ class Interrupted(PoseconsError):
     def __init__(self, message: str, signum: int):
         super().__init__(message)
         self.exit_code = 128 + signum
+
+
+class Collapsed(PoseconsError):
+    """A run whose depth collapsed in training (:mod:`posecons.training.collapse`): no bad input, but a
+    result not to be used; it exits with 1."""
+
+    exit_code = 1

@@ -16,6 +16,7 @@ Batch keys (see ``posecons.data``):
 from __future__ import annotations
 
 import logging
+import math
 from typing import Callable
 
 import torch
@@ -93,7 +94,9 @@ class PoseConsModel(nn.Module):
         m = config.model
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
         self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
-        self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror, rotation_scale=m.pose_rotation_scale)
+        self.pose_net = PoseNet(
+            m.num_layers, imagenet, m.pose_mirror, rotation_scale=m.pose_rotation_scale, zero_init=m.pose_zero_init
+        )
         self.photometric_error = (
             _CompiledOrEager(photometric_error) if config.train.compile_losses else photometric_error
         )
@@ -195,7 +198,7 @@ class PoseConsModel(nn.Module):
             dc, masks = None, None
             if lo.depth_consistency_weight > 0:
                 dc, masks = self._depth_consistency(disps[0], source_disp, K, poses)
-            losses, automask = self._view_synthesis_losses(frames.float(), K, disps, poses, masks)
+            losses, automask, warp_gain = self._view_synthesis_losses(frames.float(), K, disps, poses, masks)
             # The paper's constraints (SPEC §5), each in the reading order of its equation.
             if "fb" in constraints:  # d(T_{f←0}, inverse(T_{0←f} from the reversed pair)) for each source
                 losses["fb"] = forward_backward_loss(
@@ -241,6 +244,7 @@ class PoseConsModel(nn.Module):
             "poses": poses,
             "depth": disp_to_depth(disps[0], m.min_depth, m.max_depth)[1],
             "automask": automask,
+            "warp_gain": warp_gain,
         }
         return outputs, losses
 
@@ -313,11 +317,13 @@ class PoseConsModel(nn.Module):
         disps: dict,
         poses: dict[int, torch.Tensor],
         masks: torch.Tensor | None = None,
-    ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    ) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor]:
         """Min-reprojection with auto-masking plus smoothness, averaged over scales (SPEC §3–4);
-        also the full-scale auto-mask (B, H, W), True where a warped source won. ``masks`` (B, S, H, W):
-        weights of each source's reprojection error before the minimum (SC-Depth's self-discovered
-        mask, resized to each scale)."""
+        also the full-scale auto-mask (B, H, W), True where a warped source won, and the warp's gain
+        at that scale: 1 − (mean best warped error) / (mean best unwarped error), > 0 where depth and
+        pose explain the target better than no motion (NaN without the auto-mask, which alone
+        computes the unwarped error). ``masks`` (B, S, H, W): weights of each source's reprojection
+        error before the minimum (SC-Depth's self-discovered mask, resized to each scale)."""
         m, lo = self.config.model, self.config.loss
         h, w = m.height, m.width
         target, sources = frames[:, 0], [frames[:, i] for i in range(1, frames.shape[1])]
@@ -345,12 +351,16 @@ class PoseConsModel(nn.Module):
             if lo.automask and (identity is None or lo.v1_multiscale):
                 identity = torch.cat([self.photometric_error(src, tgt, lo.ssim_weight) for src in srcs], 1)
             per_pixel, keep = min_reprojection(reproj, identity if lo.automask else None)
-            automask = keep if automask is None else automask
+            if automask is None:
+                automask, warp_gain = keep, torch.tensor(math.nan)
+                if lo.automask:
+                    warp_gain = 1 - reproj.detach().min(1).values.mean() / identity.min(1).values.mean()
             photo.append(per_pixel.mean())
             smooth.append(lo.smoothness_weight / 2**s * smoothness_loss(disps[s].float(), _resize(target, hs, ws)))
         photometric = torch.stack(photo).mean()
         smoothness = torch.stack(smooth).mean()
-        return {"photometric": photometric, "smoothness": smoothness, "total": photometric + smoothness}, automask
+        losses = {"photometric": photometric, "smoothness": smoothness, "total": photometric + smoothness}
+        return losses, automask, warp_gain
 
 
 def _resize(image: torch.Tensor, height: int, width: int) -> torch.Tensor:

@@ -17,6 +17,7 @@ from ..config import load_config, resolve_preset
 from ..data.gt import export_gt
 from ..data.splits import read_split
 from ..data.synth import generate_synth
+from ..errors import Collapsed
 from ..evaluation import evaluate
 from ..evaluation.compare import checkpoint_note, result_cells, table1
 from ..fileio import write_json, write_text
@@ -130,10 +131,16 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
         "train_minutes": train_minutes,
         "precision": trained["precision"],
         "minutes": (time.time() - start) / 60,
+        "collapse": trained["collapse"],
         "config": config.to_dict(),
     }
     write_json(out / "summary.json", summary)
     write_text(out / "report.md", _report(summary, depth, before, stable, pose, odom_seq, meta))
+    if trained["collapse"]["problems"]:
+        raise Collapsed(
+            f"the depth collapsed in training: {'; '.join(trained['collapse']['problems'])} "
+            f"(TensorBoard: {run / 'tb'}, mask/*); the report {out / 'report.md'} is not a result"
+        )
     return summary
 
 
@@ -149,9 +156,13 @@ def _report(s: dict, depth: dict, before: dict, stable: dict, pose: dict, seq: s
             ("trained + `predict --stabilise`", stable),
         )
     ]
+    collapse = "".join(
+        f"**The depth collapsed in training**: {p}. The numbers below are not a result.\n\n"
+        for p in s["collapse"]["problems"]
+    )
     return f"""# posecons demo report
 
-Synthetic KITTI-format data (seed {meta.get("seed")}, {len(meta.get("drives", []))} drives), ResNet-{m["num_layers"]}
+{collapse}Synthetic KITTI-format data (seed {meta.get("seed")}, {len(meta.get("drives", []))} drives), ResNet-{m["num_layers"]}
 at {m["width"]}×{m["height"]}, batch {t["batch_size"]}, lr {t["lr"]}, {t["max_steps"]} steps with {words},
 trained on the CPU in {s["train_minutes"]:.1f} min with precision {s["precision"]} (whole demo {s["minutes"]:.1f} min).
 Evaluated: {checkpoint_note(s["checkpoint"])}.

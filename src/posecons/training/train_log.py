@@ -1,6 +1,6 @@
 """The run's TensorBoard log, ``RUN/tb/``, which the main rank writes: at step 1 and every
 ``train.log_every`` steps the losses, the learning rate of the step and the signs of a collapse
-(:func:`collapse_signs`); every ``train.image_every`` steps an input frame, its disparity and
+(:func:`~posecons.training.collapse.collapse_signs`); every ``train.image_every`` steps an input frame, its disparity and
 auto-mask; after each validation its finite metrics. Kept apart from the trainer, which says when
 to log and not how, and so that only the main rank imports TensorBoard."""
 
@@ -22,15 +22,28 @@ def open_log(out: Path):
     return SummaryWriter(out / "tb")
 
 
+def logs_scalars(t: TrainConfig, step: int) -> bool:
+    """Whether step ``step`` logs its scalars: the first step and every ``train.log_every``-th."""
+    return step % t.log_every == 0 or step == 1
+
+
 def log_step(
-    writer, t: TrainConfig, step: int, losses: dict[str, float], lr: float, batch: dict, outputs: dict
+    writer,
+    t: TrainConfig,
+    step: int,
+    losses: dict[str, float],
+    lr: float,
+    batch: dict,
+    outputs: dict,
+    signs: dict[str, float] | None,
 ) -> None:
-    """The scalars of training step ``step`` and, at the image interval, its images."""
-    if step % t.log_every == 0 or step == 1:
+    """The scalars of training step ``step`` (with ``signs``, the collapse signs of a step that logs
+    scalars) and, at the image interval, its images."""
+    if signs is not None:
         for k, v in losses.items():
             writer.add_scalar(f"loss/{k}", v, step)
         writer.add_scalar("lr", lr, step)
-        for k, v in collapse_signs(outputs).items():
+        for k, v in signs.items():
             writer.add_scalar(f"mask/{k}", v, step)
     if t.image_every and step % t.image_every == 0:
         writer.add_image("input", batch["frames"][0, 0], step)
@@ -45,17 +58,3 @@ def log_validation(writer, step: int, metrics: dict[str, Any]) -> None:
     for k, v in metrics.items():
         if isinstance(v, (int, float)) and math.isfinite(v):
             writer.add_scalar(f"val/{k}", v, step)
-
-
-def collapse_signs(outputs: dict) -> dict[str, float]:
-    """The signs of a run collapsing from scratch (experiments/investigation.md §3, §27), from the model's
-    outputs: the share of pixels where a warped source beat the unwarped one (the auto-mask hiding the
-    rest from the loss), and the shares of full-scale disparities pinned at the far end (sigmoid < 0.01)
-    and at the near end (sigmoid > 0.99, every pixel at ``model.min_depth``): a saturated sigmoid passes
-    almost no gradient, so a run pinned at either end stays there."""
-    disp = outputs["disp"][0].detach()
-    return {
-        "warped_fraction": float(outputs["automask"].float().mean()),
-        "far_fraction": float((disp < 0.01).float().mean()),
-        "near_fraction": float((disp > 0.99).float().mean()),
-    }

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import math
 import signal
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -46,13 +47,14 @@ from ..data.frames import EpochOrder
 from ..errors import Interrupted, PoseconsError
 from ..fileio import keep_copy, write_json, write_text
 from ..model import PoseConsModel
+from .collapse import CollapseWatch, collapse_signs
 from .distributed import Dist, finish_distributed, init_distributed, validation_group, wait_for_validation
 from .initial_weights import initial_model, without_imagenet
 from .precision import adam, autocast, resolve_precision, use_deterministic_algorithms
 from .resume import PREVIOUS, restore_training_state, state_to_resume, training_state
 from .run_dir import hold_run_dir, prepare_run_dir, write_crash_record
 from .signals import StopRequest
-from .train_log import log_step, log_validation, open_log
+from .train_log import log_step, log_validation, logs_scalars, open_log
 from .validation import Validator, describe_selection
 from .warmup import warmed_up, warmup_factor
 
@@ -148,6 +150,7 @@ class Trainer:
                 + (f" ({why})" if why else "")
             )
         self.writer = open_log(self.out) if self.env.main else None
+        self.collapse = CollapseWatch(start=max(t.warmup_steps, 1))
 
     # ------------------------------------------------------------------ loop
     def fit(self) -> dict[str, Any]:
@@ -180,7 +183,10 @@ class Trainer:
             "precision": self.precision,
             "best_metric": self.config.train.best_metric,
             "last_validation": last_metrics,
+            "collapse": self.collapse.summary(),
         }
+        for problem in summary["collapse"]["problems"]:
+            print(f"warning: at the end of training {problem}: the depth has collapsed", file=sys.stderr)
         if self.writer:
             self.writer.close()
         return summary
@@ -296,9 +302,15 @@ class Trainer:
             )
 
     def _log(self, losses: dict[str, float], batch: dict, outputs: dict) -> None:
-        if self.writer:  # the rate that the step just taken used, warm-up included
-            lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, self.config.train.warmup_steps)
-            log_step(self.writer, self.config.train, self.step, losses, lr, batch, outputs)
+        if not self.writer:
+            return
+        signs = collapse_signs(outputs) if logs_scalars(self.config.train, self.step) else None
+        if signs is not None:
+            for problem in self.collapse.update(self.step, signs):
+                tqdm.write(f"warning: step {self.step}: {problem}; the depth may have collapsed", file=sys.stderr)
+        # the rate that the step just taken used, warm-up included
+        lr = self.optimizer.param_groups[0]["lr"] * warmup_factor(self.step, self.config.train.warmup_steps)
+        log_step(self.writer, self.config.train, self.step, losses, lr, batch, outputs, signs)
 
     def _stop_requested(self) -> bool:
         """True once a signal asked to stop; every rank must agree, or the others would wait forever."""
