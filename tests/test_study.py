@@ -94,9 +94,20 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     assert untrained["checkpoint"]["step"] == 0 and untrained["depth"]["frame"]["abs_rel"] > 0
     floor = json.loads((results / "renderer_depth_seed0.json").read_text())["depth"]["frame"]
     assert floor["abs_rel"] < untrained["depth"]["frame"]["abs_rel"] / 2  # the renderer's depth: near perfect
+    constant = json.loads((results / "constant_depth_seed0.json").read_text())["depth"]["frame"]
+    assert constant["scale_cv"] == 0 or constant["abs_rel"] > floor["abs_rel"]  # one depth everywhere: no shape
+    assert constant["predictions"] == "a constant depth" and len(constant["scales"]) == SYNTH["frames"]
 
     report = (out / "results.md").read_text()
     assert "runs done: 2 of 2" in report and "missing" not in report
+    bar = 0.8 * constant["abs_rel"]
+    learnt = {
+        v: json.loads((results / f"{v}_seed0.json").read_text())["depth"]["frame"]["abs_rel"] <= bar for v in variants
+    }
+    assert f"A run has learnt when its abs rel is at most {bar:.3f}" in report
+    for v, ok in learnt.items():
+        assert f"| {v} | {int(ok)} of 1 |" in report
+    assert report.index("## Runs that learnt") < report.index("## Depth")
     for part in ("Frame-median scaling", "Per-sequence scaling", "Odometry sequence 02", "Paired differences"):
         assert part in report
     assert (
@@ -115,6 +126,7 @@ def test_study_end_to_end_skips_done_runs_resumes_interrupted_and_rebuilds_from_
     copies = sorted(p.name for p in (tmp_path / "docs/results/json").glob("[!.]*.json"))
     assert copies == [
         "baseline_seed0.json",
+        "constant_depth_seed0.json",
         "cyc_seed0.json",
         "renderer_depth_seed0.json",
         "study.json",
@@ -241,6 +253,19 @@ def test_a_spec_pins_the_compute_threads_of_its_runs_and_records_them(tmp_path, 
     assert "compute threads per run: 1, pinned by the spec" in (out / "results.md").read_text()
     with pytest.raises(PoseconsError, match="threads must be an integer ≥ 1"):
         load_spec(write_spec(tmp_path / "bad.yaml", threads=0))
+
+
+def test_the_first_row_counts_the_runs_that_learnt_against_a_constant_depth():
+    def result(variant, seed, abs_rel):
+        return {"variant": variant, "seed": seed, "depth": {"frame": {"abs_rel": abs_rel}}}
+
+    results = [result("constant_depth", 0, 0.5), result("a", 0, 0.399), result("a", 1, 0.4), result("a", 2, 0.401)]
+    results += [result("b", 1, 1.2), result("b", 0, float("nan"))]
+    table = report.learning_table(["a", "b"], results)
+    assert "at most 0.400: 20% below a constant depth's (0.500" in table
+    assert "| a | 2 of 3 | 2 (0.401) |" in table  # at the bar learns; above it does not
+    assert "| b | 0 of 2 | 0 (nan), 1 (1.200) |" in table  # a NaN score has not learnt
+    assert "not judged" in report.learning_table(["a"], results[1:])
 
 
 def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):

@@ -52,10 +52,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--profile",
-        choices=("street", "open"),
+        choices=("street", "open", "sparse"),
         default="street",
-        help="scene statistics: street (the studies' benchmark) or open (a second benchmark: speed "
-        "0.3–2 m a frame, sharper turns, façades 6–30 m away, more open lots)",
+        help="scene statistics: street (the studies' benchmark), open (a second benchmark: speed "
+        "0.3–2 m a frame, sharper turns, façades 6–30 m away, more open lots) or sparse (a third: a "
+        "wider camera, 0.75 × KITTI's focal length, little fine texture, 0.8–2.2 m a frame)",
     )
 
     p = add_command(subparsers, "export-gt", _export_gt)

@@ -19,7 +19,7 @@ from ..errors import PoseconsError
 from ..evaluation.compare import DIGITS, EIGEN_COLUMNS, markdown_table, table1
 from ..fileio import output_dir, write_text
 from ..metrics.stats import ALPHA, MIN_SEEDS, POWER, compare, mean_std, paired_differences
-from .spec import FLOOR, UNTRAINED
+from .spec import CONSTANT, FLOOR, UNTRAINED
 
 STUDY_FILE = "study.json"
 FAILED = "failed"  # the subfolder of the failed runs' records
@@ -332,6 +332,33 @@ def _figure1(variants: Sequence[str], results: Sequence[dict], figures: Path) ->
     )
 
 
+# A run has learnt when its abs rel (frame-median scaling) is at least this share below a constant depth's.
+LEARN_MARGIN = 0.2
+
+
+def learning_table(variants: Sequence[str], results: Sequence[dict]) -> str:
+    """The study's first row: how many runs of each variant learnt (abs rel ≤ (1 − LEARN_MARGIN) × a
+    constant depth's), and the seeds of those that did not."""
+    constant = next((r for r in results if r["variant"] == CONSTANT), None)
+    if constant is None:
+        return "No constant-depth row yet: whether the runs learnt is not judged.\n"
+    bar = (1 - LEARN_MARGIN) * constant["depth"]["frame"]["abs_rel"]
+    rows = []
+    for v in variants:
+        runs = sorted((r for r in results if r["variant"] == v), key=lambda r: r["seed"])
+        failed = [
+            f"{r['seed']} ({r['depth']['frame']['abs_rel']:.3f})"
+            for r in runs
+            if not r["depth"]["frame"]["abs_rel"] <= bar
+        ]
+        rows.append([v, f"{len(runs) - len(failed)} of {len(runs)}", ", ".join(failed) or "–"])
+    return (
+        f"A run has learnt when its abs rel is at most {bar:.3f}: {LEARN_MARGIN:.0%} below a constant depth's "
+        f"({constant['depth']['frame']['abs_rel']:.3f}, frame-median scaling).\n\n"
+        + markdown_table(["variant", "runs that learnt", "seeds that did not (abs rel)"], rows)
+    )
+
+
 def _missing(study: dict, results: Sequence[dict]) -> tuple[list[str], list[str], int]:
     """(missing runs, missing untrained seeds, runs done) against the spec's variants × seeds."""
     have = {(r["variant"], int(r["seed"])) for r in results}
@@ -370,7 +397,8 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
     from ..plots import plot_paired_differences
 
     variants = list(study["variants"])
-    names = [UNTRAINED] + ([FLOOR] if any(r["variant"] == FLOOR for r in results) else []) + variants
+    references = [n for n in (FLOOR, CONSTANT) if any(r["variant"] == n for r in results)]
+    names = [UNTRAINED, *references, *variants]
     missing, untrained_missing, done = _missing(study, results)
     runs = len(study["seeds"]) * len(variants)
     envs = [r["environment"] for r in results if "environment" in r]
@@ -381,7 +409,7 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
             for e in envs
         )
     )
-    trained = [r for r in results if r["variant"] not in (UNTRAINED, FLOOR)]
+    trained = [r for r in results if r["variant"] not in (UNTRAINED, FLOOR, CONSTANT)]
     failed = "".join(
         f"\n- **failed** (the same command retries it): {f['variant']} seed {f['seed']}: {f['error']} (log: `{f['log']}`)"
         for f in failures
@@ -431,6 +459,9 @@ def report_text(study: dict, results: Sequence[dict], figures: Path, failures: S
             "would hold the machine's effect as well as the variant's): " + "; ".join(left_out) + ".\n"
         )
     return f"""{header}
+## Runs that learnt
+
+{learning_table(variants, results)}
 ## Depth (paper Table 1 layout)
 
 Test: {_data_line(study["data"])}{"" if "rgbd" in study["data"] else "; Garg crop"}; σ/μ per sequence of the per-frame scales, their mean
@@ -474,11 +505,11 @@ def write_report(results_dir: Path, report: Path, study: dict | None = None, pub
     figures = report.with_suffix("")
     # Only the study's runs: a results folder shared by several specs, or a --seeds/--variants
     # selection, holds others, which would otherwise enter the means and the pairs.
-    names = {UNTRAINED, FLOOR, *study["variants"]}
+    names = {UNTRAINED, FLOOR, CONSTANT, *study["variants"]}
     results = [
         r
         for r in load_results(results_dir)
-        if r["variant"] in names and (r["variant"] == FLOOR or r["seed"] in study["seeds"])
+        if r["variant"] in names and (r["variant"] in (FLOOR, CONSTANT) or r["seed"] in study["seeds"])
     ]
     in_study = [f for f in load_failures(results_dir) if f["variant"] in names and f["seed"] in study["seeds"]]
     text = report_text(study, results, figures, in_study)

@@ -43,6 +43,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 import yaml
 from filelock import FileLock
@@ -62,7 +63,7 @@ from ..training.precision import cpu_kind, processor_name
 from ..training.run_dir import run_in_progress
 from ..training.trainer import train
 from .report import FAILED, STUDY_FILE, read_json, write_report
-from .spec import FLOOR, UNTRAINED, StudySpec
+from .spec import CONSTANT, FLOOR, UNTRAINED, StudySpec
 
 SCALINGS = ("frame", "sequence")
 
@@ -284,6 +285,28 @@ def depth_floor(spec: StudySpec, data: StudyData) -> dict[str, Any]:
         for s in SCALINGS
     }
     return {"variant": FLOOR, "seed": 0, "depth": depth}
+
+
+def constant_depth(spec: StudySpec, data: StudyData) -> dict[str, Any]:
+    """A depth that is the same everywhere, evaluated like a run (frame-median scaling makes it each
+    frame's median ground truth): the score of a collapsed run, which a run must beat to have learnt."""
+    m = spec.config(spec.reference, spec.seeds[0]).model
+    disps = np.ones((len(data.split), m.height, m.width), np.float32)
+    gts, _ = load_gt(data.gt)
+    depth = {
+        s: evaluate.evaluate_depth(
+            disps,
+            gts,
+            data.split,
+            data.gt_kind,
+            "a constant depth",
+            scaling=s,
+            gt_name=str(data.gt),
+            depth_range=data.depth_range,
+        )
+        for s in SCALINGS
+    }
+    return {"variant": CONSTANT, "seed": 0, "depth": depth}
 
 
 def record_failure(out: Path, variant: str, seed: int, error: str, log: Path) -> str:
@@ -521,6 +544,9 @@ def _prepare(spec: StudySpec, out: Path, env: dict[str, str]) -> StudyData:
     if "synth" in spec.data and not floor.is_file():
         write_json(floor, {**depth_floor(spec, data), "environment": env, "finished": _now()})
         print("[study] evaluated the renderer's own depth (the floor of every depth metric)", flush=True)
+    constant = results / result_name(CONSTANT, 0)
+    if not constant.is_file():
+        write_json(constant, {**constant_depth(spec, data), "environment": env, "finished": _now()})
     return data
 
 

@@ -49,6 +49,7 @@ RGBD_TEXTS = ("color", "depth", "poses", "calib")  # prepare-rgbd's patterns and
 RGBD_NUMBERS = {"depth_scale": None, "every": 1, "test_from": None, "gap": 20, "min_depth": 0.1, "max_depth": None}
 UNTRAINED = "untrained"  # the name of the reference row: no variant may take it
 FLOOR = "renderer_depth"  # synthetic data: the renderer's own depth evaluated as a prediction (the floor)
+CONSTANT = "constant_depth"  # one depth everywhere, evaluated as a prediction: what a collapsed run scores
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")  # variant names become folder and file names
 
 
@@ -268,9 +269,9 @@ def _variants(variants: Any) -> dict[str, list[str]]:
         raise PoseconsError(f"variants must be a non-empty mapping of name → overrides, got {variants!r}")
     out = {}
     for name, overrides in variants.items():
-        if not isinstance(name, str) or not NAME.fullmatch(name) or name in (UNTRAINED, FLOOR):
+        if not isinstance(name, str) or not NAME.fullmatch(name) or name in (UNTRAINED, FLOOR, CONSTANT):
             raise PoseconsError(
-                f"variant name {name!r}: use letters, digits, '_', '.', '-' (it names folders), not {UNTRAINED!r} or {FLOOR!r}"
+                f"variant name {name!r}: use letters, digits, '_', '.', '-' (it names folders), not {UNTRAINED!r}, {FLOOR!r} or {CONSTANT!r}"
             )
         out[name] = _strings(overrides, f"variant {name!r}")
     return out

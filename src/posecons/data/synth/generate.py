@@ -197,8 +197,8 @@ def generate_synth(
     """
     check_synth_args(drives, frames, ext, width, height, neighbours, profile)
     workers = workers or min(2, os.cpu_count() or 1)
-    rig, lidar = Rig(width, height), lidar_for_width(width)
-    textures = make_textures(np.random.default_rng([seed, 1_000_003]))
+    rig, lidar = Rig(width, height, PROFILES[profile].focal), lidar_for_width(width)
+    textures = make_textures(np.random.default_rng([seed, 1_000_003]), detail=PROFILES[profile].detail)
     n_test = max(1, drives // 4)
     test_ids = list(range(drives - n_test, drives))
     rng = np.random.default_rng([seed, 2_000_003])

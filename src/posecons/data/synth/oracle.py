@@ -13,6 +13,7 @@ import numpy as np
 from ...errors import PoseconsError
 from ..splits import SplitLine
 from .generate import make_drive
+from .profile import PROFILES
 from .render import camera_depth_at
 from .rig import Rig
 
@@ -26,7 +27,7 @@ def oracle_disparities(data_path: str | Path, lines: Sequence[SplitLine], height
     if not meta_file.is_file():
         raise PoseconsError(f"{meta_file}: not found; the depth floor needs data written by `posecons synth`")
     meta = json.loads(meta_file.read_text())
-    rig = Rig(width, height)
+    rig = Rig(width, height, PROFILES[meta.get("profile", "street")].focal)
     u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
     uv = np.stack([u.ravel(), v.ravel()], 1)
     drives, out = {}, []

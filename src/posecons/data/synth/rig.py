@@ -27,16 +27,22 @@ IMU_HEIGHT = 0.93  # metres above the road; puts the Velodyne at 1.73 m and the 
 
 @dataclass(frozen=True)
 class Rig:
-    """The rig at one rendered image size (width, height)."""
+    """The rig at one rendered image size (width, height), its cameras' focal length ``focal`` × KITTI's."""
 
     width: int = KITTI_SIZE[0]
     height: int = KITTI_SIZE[1]
+    focal: float = 1.0
 
     def p_rect(self, cam: int) -> np.ndarray:
-        """(3, 4) ``P_rect_0<cam>`` scaled to the rendered size."""
+        """(3, 4) ``P_rect_0<cam>`` scaled to the rendered size, = K [I | t] with K's focal lengths × ``focal``."""
         p = calib_matrix(CAM_TO_CAM, f"P_rect_0{cam}", (3, 4), CALIB / "calib_cam_to_cam.txt").astype(np.float64)
         p[0] *= self.width / KITTI_SIZE[0]
         p[1] *= self.height / KITTI_SIZE[1]
+        if self.focal != 1.0:  # the same camera offset t under the new K
+            offset = rectified_offset(p)[:3, 3]
+            p[0, 0] *= self.focal
+            p[1, 1] *= self.focal
+            p[:, 3] = p[:, :3] @ offset
         return p
 
     def k(self, cam: int = 2) -> np.ndarray:

@@ -46,15 +46,16 @@ CAR_TINTS = (
 )
 
 
-def make_textures(rng: np.random.Generator, count: int = 4) -> list[np.ndarray]:
+def make_textures(rng: np.random.Generator, count: int = 4, detail: float = 1.0) -> list[np.ndarray]:
     """``count`` tileable multi-octave value-noise textures as a mip pyramid:
-    a list of (count, S/2^l, S/2^l) float32 arrays in [0, 1], level 0 first."""
+    a list of (count, S/2^l, S/2^l) float32 arrays in [0, 1], level 0 first. ``detail`` scales the
+    octaves finer than half a metre (periods of 16 texels and under)."""
     size = TEXTURE_SIZE
     base = np.zeros((count, size, size), dtype=np.float32)
     # a fairly flat spectrum from 3.8 m down to 6 cm: gradients at every image resolution
     for period, amplitude in ((128, 1.0), (64, 0.9), (32, 0.8), (16, 0.75), (8, 0.7), (4, 0.6), (2, 0.45)):
         grid = rng.standard_normal((count, size // period, size // period)).astype(np.float32)
-        base += amplitude * _upsample_periodic(grid, period)
+        base += amplitude * (detail if period <= 16 else 1.0) * _upsample_periodic(grid, period)
     base -= base.mean(axis=(1, 2), keepdims=True)
     base = np.clip(0.5 + base / (6 * base.std(axis=(1, 2), keepdims=True)), 0.0, 1.0)
     levels = [base]
