@@ -1,6 +1,10 @@
 """End-to-end: `posecons evaluate-depth`, `evaluate-pose` and `compare` on small files written here."""
 
+import io
 import json
+import pickle
+import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -99,6 +103,60 @@ def test_evaluate_depth_bad_input_names_the_file(depth_files, capsys):
     assert (
         with_split("same.txt", f"{DRIVE} 0000000001 l\n2011_09_26/2011_09_26_drive_0009_sync 5 l\n{DRIVE} 2 l\n") == 0
     )
+
+
+def _write_monodepth2_gt(path, maps):
+    """As Monodepth2's export_gt_depth.py: ``np.savez_compressed(path, data=np.array(gt_depths))`` of float32
+    maps. The numpy 1 it ran on made maps of several sizes an object array without being asked, pickled
+    (protocol 3) under numpy 1's module name numpy.core.multiarray."""
+    maps = [m.astype(np.float32) for m in maps]
+    if len({m.shape for m in maps}) == 1:
+        np.savez_compressed(path, data=np.array(maps))
+        return
+    data, npy = np.array(maps, dtype=object), io.BytesIO()
+    np.lib.format.write_array_header_1_0(npy, np.lib.format.header_data_from_array_1_0(data))
+    pickle.dump(data, npy, protocol=3)
+    payload = npy.getvalue().replace(b"cnumpy._core.multiarray\n", b"cnumpy.core.multiarray\n")
+    assert b"cnumpy.core.multiarray\n_reconstruct" in payload
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("data.npy", payload)
+
+
+@pytest.mark.parametrize("sizes", ["several sizes", "one size"])
+def test_evaluate_depth_reads_monodepth2s_gt_depths_with_the_split_file(depth_files, capsys, sizes):
+    """The same maps as Monodepth2 saves them score as they do from export-gt's file. Caught: the file
+    refused (the old "not a posecons ground-truth file"), the maps out of order, the split file's length
+    not checked against it, the file read without its lines, an object that is no array unpickled."""
+    out = depth_files
+    with np.load(out / "gt.npz") as data:
+        lines = [str(s) for s in data["lines"]]
+        maps = [data[f"{i:06d}"] for i in range(len(lines))]
+    if sizes == "one size":
+        maps = [m[:37, :122] for m in maps]
+        _write_gt(out / "gt.npz", maps, lines)
+    _write_monodepth2_gt(out / "md2.npz", maps)
+    (out / "test_files.txt").write_text("".join(line + "\n" for line in lines))
+    base = ["evaluate-depth", "--pred-disps", str(out / "pred.npy")]
+    assert main([*base, "--gt", str(out / "gt.npz"), "--json", str(out / "own.json")]) == 0
+    md2 = [*base, "--gt", str(out / "md2.npz"), "--split-file", str(out / "test_files.txt")]
+    assert main([*md2, "--json", str(out / "md2.json")]) == 0
+    own, theirs = (json.loads((out / f"{n}.json").read_text()) for n in ("own", "md2"))
+    assert theirs["per_frame_abs_rel"] == own["per_frame_abs_rel"] and theirs["abs_rel"] == own["abs_rel"]
+    assert theirs["per_sequence"] == own["per_sequence"]
+
+    def refused(argv: list[str], message: str) -> None:
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err, err
+
+    refused(
+        [*base, "--gt", str(out / "md2.npz")], "md2.npz: Monodepth2's ground truth names no frames; pass --split-file"
+    )
+    (out / "short.txt").write_text("".join(line + "\n" for line in lines[:2]))
+    refused([*base, "--gt", str(out / "md2.npz"), "--split-file", str(out / "short.txt")], "short.txt has 2 lines but")
+    np.savez_compressed(out / "evil.npz", data=np.array([maps[0], Path("x")], dtype=object))
+    refused([*base, "--gt", str(out / "evil.npz"), "--split-file", str(out / "test_files.txt")], "refused to unpickle")
 
 
 def test_evaluate_depth_with_a_fixed_scale_factor(tmp_path, capsys):

@@ -29,8 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--gt",
         type=Path,
         metavar="GT.npz",
-        help="exported ground truth (required with --pred-disps; "
-        "with --checkpoint it is exported on the fly when missing)",
+        help="exported ground truth, or Monodepth2's gt_depths.npz with its --split-file (required with "
+        "--pred-disps; with --checkpoint it is exported on the fly when missing)",
     )
     p.add_argument("--data-path", type=Path, help="KITTI raw root (with --checkpoint)")
     p.add_argument("--split-file", type=Path, help="split lines; gives the sequences (default: the GT's lines)")
@@ -126,8 +126,9 @@ def _predictor(args: argparse.Namespace):
     return load_predictor(args.checkpoint, args.device or "auto")
 
 
-def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str], Path]:
-    """GT depth maps, their split lines and the file they came from (exported into tmp if needed)."""
+def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str] | None, Path]:
+    """GT depth maps, their split lines (None: Monodepth2's file, which has none) and the file they
+    came from (exported into tmp if needed)."""
     from ..data.gt import export_gt, load_gt
 
     gt_path = args.gt
@@ -135,7 +136,11 @@ def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray]
         gt_path = tmp / "gt_depths.npz"
         export_gt(args.data_path, args.split_file, gt_path, improved=args.gt_kind == "improved")
     gts, lines = load_gt(gt_path)
-    return list(gts), [str(line) for line in lines], gt_path
+    if lines is None and args.split_file is None:
+        raise PoseconsError(
+            f"{gt_path}: Monodepth2's ground truth names no frames; pass --split-file, the test_files.txt it was made from"
+        )
+    return list(gts), lines, gt_path
 
 
 def evaluate_depth_command(args: argparse.Namespace) -> int:
@@ -176,7 +181,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     split = read_split(args.split_file if args.split_file else gt_lines)
     if len(split) != len(gts):
         raise PoseconsError(f"{args.split_file} has {len(split)} lines but {gt_path} has {len(gts)} frames")
-    for line, stored in zip(split, read_split(gt_lines)):  # the same frames in the same order, not just as many
+    for line, stored in zip(split, read_split(gt_lines or [])):  # the same frames in the same order, not just as many
         if str(line) != str(stored):
             raise PoseconsError(
                 f"{line.where}: '{line}' does not match line '{stored}' that {gt_path} was "
