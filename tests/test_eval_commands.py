@@ -271,10 +271,11 @@ def test_evaluate_pose_from_a_trajectory_file(pose_files, kitti_dir):
     assert (out / "traj" / "trajectory.png").stat().st_size > 1000
 
 
-@pytest.mark.parametrize("align", ["7dof", "6dof"])
+@pytest.mark.parametrize("align", ["7dof", "6dof", "scale"])
 def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, align):
-    """All of odometry 09 predicted exactly but at half the scale: Sim(3) makes t_err zero, SE(3) leaves half
-    of each segment's chord as error (t_err under 50 %). Catches --align not reaching the metrics or the print."""
+    """All of odometry 09 predicted exactly but at half the scale: Sim(3) and the positions-only scale make
+    t_err zero, SE(3) leaves half of each segment's chord as error (t_err under 50 %). Catches --align not
+    reaching the metrics or the print."""
     gt_file = kitti_dir / "odometry" / "poses" / "09.txt"
     pred = read_kitti_poses(gt_file)
     pred[:, :3, 3] *= 0.5
@@ -283,7 +284,7 @@ def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, al
     assert main([*argv, "--align", align, "--json", str(tmp_path / "pose.json")]) == 0
     result = json.loads((tmp_path / "pose.json").read_text())
     assert result["alignment"] == result["const_velocity"]["alignment"] == align
-    if align == "7dof":
+    if align != "6dof":
         assert result["t_err"] == pytest.approx(0.0, abs=1e-4) and result["r_err"] == pytest.approx(0.0, abs=1e-4)
     else:
         assert 30 < result["t_err"] < 50 and result["r_err"] == pytest.approx(0.0, abs=1e-4)

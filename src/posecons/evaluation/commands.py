@@ -93,7 +93,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--align",
         choices=pose.ALIGNMENTS,
         default="7dof",
-        help="alignment before t_err / r_err: Sim(3) (monocular) or SE(3) (metric: the devkit's own numbers)",
+        help="alignment before t_err / r_err: Sim(3) (monocular), SE(3) (metric: the devkit's own numbers) or "
+        "scale (one factor fitted on the positions, kitti-odom-eval's --align scale)",
     )
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
