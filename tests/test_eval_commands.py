@@ -294,12 +294,39 @@ def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, al
     )
 
 
+def test_evaluate_pose_scores_the_first_frames_of_a_shorter_prediction(tmp_path, kitti_dir, capsys):
+    """A noisy prediction of the first 900 of odometry 09's 1591 frames scores as it does against those 900
+    GT poses — kitti-odom-eval's segments, those with both ends among the predicted frames — and the output
+    says so. Caught: the prediction refused (the old behaviour), scored against the whole GT, or silently."""
+    gt = read_kitti_poses(kitti_dir / "odometry" / "poses" / "09.txt")
+    pred = gt[:900].copy()
+    pred[:, :3, 3] = 0.5 * pred[:, :3, 3] + np.random.default_rng(0).normal(0, 0.3, (900, 3))
+    write_kitti_poses(tmp_path / "pred.txt", pred)
+    write_kitti_poses(tmp_path / "gt_900.txt", gt[:900])
+    argv = ["evaluate-pose", "--pred-poses", str(tmp_path / "pred.txt"), "--times", str(tmp_path / "times.txt")]
+    (tmp_path / "times.txt").write_text("".join(f"{i / 10:.6e}\n" for i in range(len(gt))))
+    gt_file = str(kitti_dir / "odometry" / "poses" / "09.txt")
+    argv_full = [*argv, "--gt-poses", gt_file, "--out-dir", str(tmp_path / "t")]
+    assert main([*argv_full, "--json", str(tmp_path / "short.json")]) == 0
+    assert f"scoring the first 900 of the 1591 poses of {gt_file}: " in capsys.readouterr().out
+    (tmp_path / "times.txt").write_text("".join(f"{i / 10:.6e}\n" for i in range(900)))
+    assert main([*argv, "--gt-poses", str(tmp_path / "gt_900.txt"), "--json", str(tmp_path / "cut.json")]) == 0
+    assert "scoring the first" not in capsys.readouterr().out
+    short, cut = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("short", "cut"))
+    assert (short["n_frames"], short["n_gt_poses"], cut["n_gt_poses"]) == (900, 1591, 900)
+    assert short["n_segments"] > 0 and short["t_err"] > 0.1
+    for key in ("t_err", "r_err", "n_segments", "ate_mean", "ate_full_rmse", "segment_lengths"):
+        assert short[key] == cut[key], key
+    assert short["const_velocity"] == cut["const_velocity"]
+    assert len(read_tum(tmp_path / "t" / "gt_tum.txt")[0]) == 900
+
+
 def test_evaluate_pose_bad_input(pose_files, capsys):
     out = pose_files
     lines = (out / "pred.txt").read_text().splitlines()
-    (out / "short.txt").write_text("\n".join(lines[:-1]) + "\n")
-    assert main(["evaluate-pose", "--pred-poses", str(out / "short.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
-    assert "short.txt has 119 poses but" in capsys.readouterr().err
+    (out / "long.txt").write_text("\n".join(lines + lines[-1:]) + "\n")
+    assert main(["evaluate-pose", "--pred-poses", str(out / "long.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
+    assert "long.txt has 121 poses but" in capsys.readouterr().err
     (out / "cols.txt").write_text("\n".join(lines[:5] + [lines[5] + " 1.0"] + lines[6:]) + "\n")
     assert main(["evaluate-pose", "--pred-poses", str(out / "cols.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
     assert "cols.txt:6: expected 12 numbers" in capsys.readouterr().err

@@ -242,6 +242,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
     from . import compare, evaluate
 
     gt = trajectory_io.read_kitti_poses(args.gt_poses)
+    n_gt_poses = len(gt)
     times = trajectory_io.read_times(args.times) if args.times else None
     if times is not None and len(times) != len(gt):
         raise PoseconsError(f"{args.times} has {len(times)} timestamps but {args.gt_poses} has {len(gt)} poses")
@@ -260,11 +261,19 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         checkpoint = describe_checkpoint(args.checkpoint)
     else:
         estimate, source = trajectory_io.read_kitti_poses(args.pred_poses), str(args.pred_poses)
-        if len(estimate) != len(gt):
+        if len(estimate) > len(gt):
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
+        if len(estimate) < len(gt):  # kitti-odom-eval scores the frames a prediction has
+            print(
+                f"scoring the first {len(estimate)} of the {len(gt)} poses of {args.gt_poses}: "
+                f"{args.pred_poses} has {len(estimate)} (as kitti-odom-eval does)"
+            )
+            gt = gt[: len(estimate)]
+            times = None if times is None else times[: len(estimate)]
         checkpoint = None
 
     result = evaluate.evaluate_pose(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
+    result.update(n_gt_poses=n_gt_poses)  # of which the first n_frames were scored
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")
