@@ -20,7 +20,7 @@ def test_round_trip_pt_and_safetensors(tmp_path):
     model, cfg = small_model()
     save_checkpoint(tmp_path / "m.pt", {"config": cfg.to_dict(), "model": model.state_dict(), "step": 7})
     assert [p.name for p in tmp_path.iterdir()] == ["m.pt"]  # no temp file left behind
-    save_safetensors(tmp_path / "m.safetensors", model, cfg)
+    save_safetensors(tmp_path / "m.safetensors", model.state_dict(), cfg)
     x = torch.rand(1, 3, 64, 96)
     expected = model.eval().predict_depth(x)[1]
     for name in ("m.pt", "m.safetensors"):

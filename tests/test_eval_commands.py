@@ -1,6 +1,10 @@
 """End-to-end: `posecons evaluate-depth`, `evaluate-pose` and `compare` on small files written here."""
 
+import io
 import json
+import pickle
+import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -99,6 +103,60 @@ def test_evaluate_depth_bad_input_names_the_file(depth_files, capsys):
     assert (
         with_split("same.txt", f"{DRIVE} 0000000001 l\n2011_09_26/2011_09_26_drive_0009_sync 5 l\n{DRIVE} 2 l\n") == 0
     )
+
+
+def _write_monodepth2_gt(path, maps):
+    """As Monodepth2's export_gt_depth.py: ``np.savez_compressed(path, data=np.array(gt_depths))`` of float32
+    maps. The numpy 1 it ran on made maps of several sizes an object array without being asked, pickled
+    (protocol 3) under numpy 1's module name numpy.core.multiarray."""
+    maps = [m.astype(np.float32) for m in maps]
+    if len({m.shape for m in maps}) == 1:
+        np.savez_compressed(path, data=np.array(maps))
+        return
+    data, npy = np.array(maps, dtype=object), io.BytesIO()
+    np.lib.format.write_array_header_1_0(npy, np.lib.format.header_data_from_array_1_0(data))
+    pickle.dump(data, npy, protocol=3)
+    payload = npy.getvalue().replace(b"cnumpy._core.multiarray\n", b"cnumpy.core.multiarray\n")
+    assert b"cnumpy.core.multiarray\n_reconstruct" in payload
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("data.npy", payload)
+
+
+@pytest.mark.parametrize("sizes", ["several sizes", "one size"])
+def test_evaluate_depth_reads_monodepth2s_gt_depths_with_the_split_file(depth_files, capsys, sizes):
+    """The same maps as Monodepth2 saves them score as they do from export-gt's file. Caught: the file
+    refused (the old "not a posecons ground-truth file"), the maps out of order, the split file's length
+    not checked against it, the file read without its lines, an object that is no array unpickled."""
+    out = depth_files
+    with np.load(out / "gt.npz") as data:
+        lines = [str(s) for s in data["lines"]]
+        maps = [data[f"{i:06d}"] for i in range(len(lines))]
+    if sizes == "one size":
+        maps = [m[:37, :122] for m in maps]
+        _write_gt(out / "gt.npz", maps, lines)
+    _write_monodepth2_gt(out / "md2.npz", maps)
+    (out / "test_files.txt").write_text("".join(line + "\n" for line in lines))
+    base = ["evaluate-depth", "--pred-disps", str(out / "pred.npy")]
+    assert main([*base, "--gt", str(out / "gt.npz"), "--json", str(out / "own.json")]) == 0
+    md2 = [*base, "--gt", str(out / "md2.npz"), "--split-file", str(out / "test_files.txt")]
+    assert main([*md2, "--json", str(out / "md2.json")]) == 0
+    own, theirs = (json.loads((out / f"{n}.json").read_text()) for n in ("own", "md2"))
+    assert theirs["per_frame_abs_rel"] == own["per_frame_abs_rel"] and theirs["abs_rel"] == own["abs_rel"]
+    assert theirs["per_sequence"] == own["per_sequence"]
+
+    def refused(argv: list[str], message: str) -> None:
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err, err
+
+    refused(
+        [*base, "--gt", str(out / "md2.npz")], "md2.npz: Monodepth2's ground truth names no frames; pass --split-file"
+    )
+    (out / "short.txt").write_text("".join(line + "\n" for line in lines[:2]))
+    refused([*base, "--gt", str(out / "md2.npz"), "--split-file", str(out / "short.txt")], "short.txt has 2 lines but")
+    np.savez_compressed(out / "evil.npz", data=np.array([maps[0], Path("x")], dtype=object))
+    refused([*base, "--gt", str(out / "evil.npz"), "--split-file", str(out / "test_files.txt")], "refused to unpickle")
 
 
 def test_evaluate_depth_with_a_fixed_scale_factor(tmp_path, capsys):
@@ -213,10 +271,11 @@ def test_evaluate_pose_from_a_trajectory_file(pose_files, kitti_dir):
     assert (out / "traj" / "trajectory.png").stat().st_size > 1000
 
 
-@pytest.mark.parametrize("align", ["7dof", "6dof"])
+@pytest.mark.parametrize("align", ["7dof", "6dof", "scale"])
 def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, align):
-    """All of odometry 09 predicted exactly but at half the scale: Sim(3) makes t_err zero, SE(3) leaves half
-    of each segment's chord as error (t_err under 50 %). Catches --align not reaching the metrics or the print."""
+    """All of odometry 09 predicted exactly but at half the scale: Sim(3) and the positions-only scale make
+    t_err zero, SE(3) leaves half of each segment's chord as error (t_err under 50 %). Catches --align not
+    reaching the metrics or the print."""
     gt_file = kitti_dir / "odometry" / "poses" / "09.txt"
     pred = read_kitti_poses(gt_file)
     pred[:, :3, 3] *= 0.5
@@ -225,7 +284,7 @@ def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, al
     assert main([*argv, "--align", align, "--json", str(tmp_path / "pose.json")]) == 0
     result = json.loads((tmp_path / "pose.json").read_text())
     assert result["alignment"] == result["const_velocity"]["alignment"] == align
-    if align == "7dof":
+    if align != "6dof":
         assert result["t_err"] == pytest.approx(0.0, abs=1e-4) and result["r_err"] == pytest.approx(0.0, abs=1e-4)
     else:
         assert 30 < result["t_err"] < 50 and result["r_err"] == pytest.approx(0.0, abs=1e-4)
@@ -235,12 +294,39 @@ def test_evaluate_pose_aligns_as_asked_for_t_err(tmp_path, kitti_dir, capsys, al
     )
 
 
+def test_evaluate_pose_scores_the_first_frames_of_a_shorter_prediction(tmp_path, kitti_dir, capsys):
+    """A noisy prediction of the first 900 of odometry 09's 1591 frames scores as it does against those 900
+    GT poses — kitti-odom-eval's segments, those with both ends among the predicted frames — and the output
+    says so. Caught: the prediction refused (the old behaviour), scored against the whole GT, or silently."""
+    gt = read_kitti_poses(kitti_dir / "odometry" / "poses" / "09.txt")
+    pred = gt[:900].copy()
+    pred[:, :3, 3] = 0.5 * pred[:, :3, 3] + np.random.default_rng(0).normal(0, 0.3, (900, 3))
+    write_kitti_poses(tmp_path / "pred.txt", pred)
+    write_kitti_poses(tmp_path / "gt_900.txt", gt[:900])
+    argv = ["evaluate-pose", "--pred-poses", str(tmp_path / "pred.txt"), "--times", str(tmp_path / "times.txt")]
+    (tmp_path / "times.txt").write_text("".join(f"{i / 10:.6e}\n" for i in range(len(gt))))
+    gt_file = str(kitti_dir / "odometry" / "poses" / "09.txt")
+    argv_full = [*argv, "--gt-poses", gt_file, "--out-dir", str(tmp_path / "t")]
+    assert main([*argv_full, "--json", str(tmp_path / "short.json")]) == 0
+    assert f"scoring the first 900 of the 1591 poses of {gt_file}: " in capsys.readouterr().out
+    (tmp_path / "times.txt").write_text("".join(f"{i / 10:.6e}\n" for i in range(900)))
+    assert main([*argv, "--gt-poses", str(tmp_path / "gt_900.txt"), "--json", str(tmp_path / "cut.json")]) == 0
+    assert "scoring the first" not in capsys.readouterr().out
+    short, cut = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("short", "cut"))
+    assert (short["n_frames"], short["n_gt_poses"], cut["n_gt_poses"]) == (900, 1591, 900)
+    assert short["n_segments"] > 0 and short["t_err"] > 0.1
+    for key in ("t_err", "r_err", "n_segments", "ate_mean", "ate_full_rmse", "segment_lengths"):
+        assert short[key] == cut[key], key
+    assert short["const_velocity"] == cut["const_velocity"]
+    assert len(read_tum(tmp_path / "t" / "gt_tum.txt")[0]) == 900
+
+
 def test_evaluate_pose_bad_input(pose_files, capsys):
     out = pose_files
     lines = (out / "pred.txt").read_text().splitlines()
-    (out / "short.txt").write_text("\n".join(lines[:-1]) + "\n")
-    assert main(["evaluate-pose", "--pred-poses", str(out / "short.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
-    assert "short.txt has 119 poses but" in capsys.readouterr().err
+    (out / "long.txt").write_text("\n".join(lines + lines[-1:]) + "\n")
+    assert main(["evaluate-pose", "--pred-poses", str(out / "long.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
+    assert "long.txt has 121 poses but" in capsys.readouterr().err
     (out / "cols.txt").write_text("\n".join(lines[:5] + [lines[5] + " 1.0"] + lines[6:]) + "\n")
     assert main(["evaluate-pose", "--pred-poses", str(out / "cols.txt"), "--gt-poses", str(out / "gt.txt")]) == 2
     assert "cols.txt:6: expected 12 numbers" in capsys.readouterr().err

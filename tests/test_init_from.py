@@ -119,7 +119,8 @@ def test_exported_safetensors_weights_are_a_start_too(tmp_path, source):
     """Catches: init_from reading only .pt checkpoints."""
     from posecons.checkpoint import load_model, save_safetensors
 
-    save_safetensors(tmp_path / "w.safetensors", *load_model(source))
+    source_model, config = load_model(source)
+    save_safetensors(tmp_path / "w.safetensors", source_model.state_dict(), config)
     model = initial_model(load_config(overrides=TINY + [f"train.init_from={tmp_path / 'w.safetensors'}"]))
     assert weights_equal(model.state_dict(), load_checkpoint(source)["model"])
     assert model.initialisation == f"weights of {tmp_path / 'w.safetensors'} (initialised: not recorded)"

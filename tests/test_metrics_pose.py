@@ -16,6 +16,7 @@ from posecons.metrics.pose import (
     quaternion_to_rotation,
     relative_from_global,
     rotation_to_quaternion,
+    scale_alignment,
     snippet_errors,
     umeyama,
 )
@@ -179,6 +180,28 @@ def test_odometry_errors_of_a_constant_scale_drift():
     assert r["r_err"] == pytest.approx(0.0, abs=1e-9)
     aligned = odometry_errors(pred, gt, "7dof")
     assert aligned["t_err"] == pytest.approx(0.0, abs=1e-9) and aligned["alignment_scale"] == pytest.approx(1 / 1.02)
+
+
+def test_scale_alignment_is_kitti_odom_evals_positions_only_factor():
+    """By hand: GT positions 0, (1, 0, 0), (2, 0, 0), predicted 0, (2, 2, 0), (2, 0, 0) (no rotation):
+    s = Σ g·p / Σ p·p = (2 + 4) / (8 + 4) = 0.5 — not Umeyama's Sim(3) scale, which also rotates and
+    shifts. The same prediction seen from another world frame (a rigid T_0 on the left) has the same s,
+    as that toolbox takes every pose relative to the first. Then a real drive predicted at a quarter of
+    its scale: s = 4 and no error left. Caught: s of the world positions (not relative to the first),
+    Σ p·p / Σ g·p, the Sim(3) scale, the factor not applied before t_err."""
+    gt = np.stack([_pose(np.eye(3), [x, 0, 0]) for x in (0, 1, 2)])
+    pred = np.stack([_pose(np.eye(3), t) for t in ([0, 0, 0], [2, 2, 0], [2, 0, 0])])
+    assert scale_alignment(pred, gt) == pytest.approx(0.5, rel=1e-12)
+    assert umeyama(pred[:, :3, 3], gt[:, :3, 3])[0] != pytest.approx(0.5, rel=1e-3)
+    elsewhere = _pose(_rotation([0, 0, 1], 0.5), [5.0, -3.0, 1.0])
+    assert scale_alignment(elsewhere @ pred, gt) == pytest.approx(0.5, rel=1e-12)
+
+    gt = _drive(400)
+    pred = gt.copy()
+    pred[:, :3, 3] *= 0.25
+    r = odometry_errors(elsewhere @ pred, gt, "scale")
+    assert r["alignment"] == "scale" and r["alignment_scale"] == pytest.approx(4.0, rel=1e-9)
+    assert r["t_err"] == pytest.approx(0.0, abs=1e-9) and odometry_errors(pred, gt, "6dof")["t_err"] > 30
 
 
 def test_odometry_errors_of_a_pure_yaw_bias():

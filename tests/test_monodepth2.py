@@ -116,6 +116,44 @@ def test_a_model_exported_to_monodepth2_and_imported_gives_identical_outputs(tmp
     assert info["initialisation"] == f"imported: Monodepth2 {tmp_path / 'md2'} (ResNet-{num_layers}, mono, 192×64)"
 
 
+def test_a_safetensors_name_gets_safetensors_that_predict_reads(tmp_path, kitti_dir):
+    """``--out m.safetensors`` writes what the name says, and predict reads it as it reads the .pt import.
+    Catches: a torch pickle written under that name (safetensors cannot open it: "header too large"),
+    the origin of the weights lost in the other format."""
+    from safetensors import safe_open
+
+    to_monodepth2(random_model(), tmp_path / "md2")
+    frame = kitti_dir / "raw_samples" / DRIVE / "image_02" / "data" / "0000000000.png"
+    for name in ("m.pt", "m.safetensors"):
+        assert main(["import-monodepth2", str(tmp_path / "md2"), "--out", str(tmp_path / name)]) == 0
+        predict = ["predict", "--checkpoint", str(tmp_path / name), "--input", str(frame), "--quiet"]
+        assert main([*predict, "--out", str(tmp_path / f"pred_{name}")]) == 0
+    with safe_open(str(tmp_path / "m.safetensors"), framework="pt") as f:
+        assert set(f.keys()) == set(load_checkpoint(tmp_path / "m.pt")["model"])
+    depth = sorted((tmp_path / "pred_m.pt").rglob("*.npy"))
+    assert depth and all(
+        np.array_equal(np.load(p), np.load(tmp_path / "pred_m.safetensors" / p.relative_to(tmp_path / "pred_m.pt")))
+        for p in depth
+    )
+    info = describe_checkpoint(tmp_path / "m.safetensors")
+    assert info["initialisation"] == describe_checkpoint(tmp_path / "m.pt")["initialisation"]
+
+
+def test_an_existing_out_file_is_refused_and_kept(tmp_path, capsys):
+    """The README's output rule: posecons replaces no file of yours. Catches: --out overwritten (the
+    file's bytes change), refused only after the import's work, or with more than one line."""
+    to_monodepth2(random_model(), tmp_path / "md2")
+    out = tmp_path / "trained.pt"
+    out.write_bytes(b"the user's checkpoint")
+    with pytest.raises(SystemExit) as exc:  # refused while the command line is read: before any work
+        main(["import-monodepth2", str(tmp_path / "md2"), "--out", str(out)])
+    assert exc.value.code == 2 and out.read_bytes() == b"the user's checkpoint"
+    message = capsys.readouterr().err.strip().splitlines()[-1]
+    assert message == f"posecons import-monodepth2: error: argument --out: {out}: exists; give a new file name " + (
+        "(posecons replaces no file of yours)"
+    )
+
+
 def test_a_stereo_model_imports_its_depth_network_and_says_so(tmp_path, capsys):
     """Catches: a stereo folder refused for its missing pose files, or imported without saying that
     the pose net is untrained; the untrained pose net depending on the caller's random state."""

@@ -1,7 +1,8 @@
 """The lab's tools in experiments/tools: at_steps.py keeps a study run's weights at the asked steps only,
 once per checkpoint write; adopt.py, automask_depth.py, camera_height.py, continue_runs.py,
-early_steps.py, ema_decays.py, residual_regions.py, scale_components.py, stabiliser_ratios.py, test_time_scale.py and
-weight_average.py as their tests say; a folder that is no study is one line and exit status 2."""
+early_steps.py, ema_decays.py, monodepth2_fp32.py, residual_regions.py, scale_components.py,
+stabiliser_ratios.py, test_time_scale.py and weight_average.py as their tests say; a folder that is no
+study is one line and exit status 2."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -480,3 +482,38 @@ def test_weight_average_folds_each_new_step_after_the_start_once(tmp_path):
     assert average["averaged_steps"] == [200, 300, 600]
     assert average["model"]["w"].tolist() == pytest.approx([1100 / 3] * 2, rel=1e-6)
     assert average["model"]["bn.num_batches_tracked"].item() == 600
+
+
+def test_the_docs_state_the_fp32_differences_from_monodepth2_that_monodepth2_fp32_measures():
+    """monodepth2_fp32.py's SSIM and CPU-disparity differences from a reference typed from Monodepth2's
+    definitions against the figures of docs/training.md ("Precision"): each measured within a factor 1.5
+    of its figure (two digits, from the development CPU), none 0, so no page may call --precision 32 bit
+    for bit. Caught: the old "bit-for-bit reproduction" and "identical disparities" claims, a change of
+    the SSIM's or the ELU's arithmetic that the figures no longer describe."""
+    tool = load_tool("monodepth2_fp32")
+    root = TOOLS.parents[1]
+    pages = ("README.md", "docs/training.md", "docs/inference.md", "src/posecons/configs/kitti/baseline.yaml")
+    text = {page: " ".join((root / page).read_text().split()) for page in pages}
+    for page in pages:
+        assert not re.search(r"bit-for-bit|identical disparit", text[page]), page
+    number = r"([0-9.]+e-[0-9]+)"
+    figures = re.search(
+        rf"SSIM terms differ from Monodepth2's by up to {number} on two consecutive real KITTI frames at "
+        rf"640×192 .*? and {number} on random images; their image means agree to {number}, and in float64 the "
+        rf"terms agree to {number}\. .*? float32 rounding, {number} on a random-weight ResNet-18",
+        text["docs/training.md"],
+    )
+    assert figures, "docs/training.md no longer states the differences in the words this test reads"
+    kitti, random, means, float64, disparity = (float(f) for f in figures.groups())
+
+    pairs = tool.image_pairs()
+    (kitti_measured, _), *random_measured = fp32 = tool.ssim_differences(torch.float32, pairs)
+    measured = {
+        kitti: kitti_measured,
+        random: max(r[0] for r in random_measured),
+        means: max(d[1] for d in fp32),
+        disparity: tool.disparity_difference(torch.cat([pairs[0][0], pairs[1][0]])),
+    }
+    for figure, value in measured.items():
+        assert figure / 1.5 <= value <= figure * 1.5, (figure, value)
+    assert max(max(d) for d in tool.ssim_differences(torch.float64, pairs)) <= float64 * 1.5

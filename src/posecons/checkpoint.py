@@ -3,7 +3,7 @@
 A training checkpoint (``.pt``) is a plain dict of tensors, numbers, strings, lists and
 dicts — ``{"config": Config.to_dict(), "model": state_dict, ...training state}`` — so
 ``torch.load(weights_only=True)`` reads it. Exported weights (``.safetensors``) hold the
-model state dict with the config as JSON metadata.
+model state dict with the config as JSON metadata, and where recorded the ``initialisation``.
 """
 
 from __future__ import annotations
@@ -58,10 +58,10 @@ def load_weights_file(path: Path, map_location: str | torch.device = "cpu") -> A
 
 def read_weights(path: str | Path, map_location: str | torch.device = "cpu") -> tuple[Config, dict, dict]:
     """Checkpoint (``.pt``) or exported weights (``.safetensors``) → (config, model state dict, the
-    checkpoint's other entries: empty for safetensors)."""
+    checkpoint's other entries: for safetensors its metadata other than the config)."""
     path = Path(path)
     if path.suffix == ".safetensors":
-        return *_read_safetensors(path, map_location), {}
+        return _read_safetensors(path, map_location)
     state = load_checkpoint(path, map_location)
     return _config(state["config"], path), state["model"], state
 
@@ -98,7 +98,11 @@ def describe_checkpoint(path: str | Path) -> dict[str, Any]:
     the encoders were initialised, and whether they are the raw or the EMA weights."""
     path = Path(path)
     if path.suffix == ".safetensors":
-        return {"file": str(path), "selected_by": "exported weights (see the run they came from)"}
+        return {
+            "file": str(path),
+            "selected_by": "exported weights (see the run they came from)",
+            "initialisation": read_weights(path)[2].get("initialisation", "not recorded"),
+        }
     state = load_checkpoint(path)
     criterion = state.get("selected_by")
     return {
@@ -121,7 +125,7 @@ def _config(data: Any, path: Path) -> Config:
         raise PoseconsError(f"{path}: its stored config is invalid: {exc}") from exc
 
 
-def _read_safetensors(path: Path, map_location) -> tuple[Config, dict[str, torch.Tensor]]:
+def _read_safetensors(path: Path, map_location) -> tuple[Config, dict[str, torch.Tensor], dict[str, str]]:
     from safetensors import SafetensorError, safe_open
 
     if not path.is_file():
@@ -134,11 +138,17 @@ def _read_safetensors(path: Path, map_location) -> tuple[Config, dict[str, torch
         raise PoseconsError(f"{path}: not a readable safetensors file ({exc})") from exc
     if "config" not in meta:
         raise PoseconsError(f"{path}: no posecons config in its metadata")
-    return _config(json.loads(meta["config"]), path), weights
+    return _config(json.loads(meta.pop("config")), path), weights, meta
 
 
-def save_safetensors(path: str | Path, model, config: Config) -> None:
+def save_safetensors(
+    path: str | Path, weights: dict[str, torch.Tensor], config: Config, initialisation: str | None = None
+) -> None:
+    """A model state dict as safetensors, its config (and ``initialisation``, where given) as metadata."""
     from safetensors.torch import save_file
 
-    state = {k: v.detach().contiguous().cpu() for k, v in model.state_dict().items()}
-    atomic_write(path, lambda tmp: save_file(state, tmp, metadata={"config": json.dumps(config.to_dict())}))
+    state = {k: v.detach().contiguous().cpu() for k, v in weights.items()}
+    meta = {"config": json.dumps(config.to_dict())}
+    if initialisation:
+        meta["initialisation"] = initialisation
+    atomic_write(path, lambda tmp: save_file(state, tmp, metadata=meta))

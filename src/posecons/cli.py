@@ -80,6 +80,15 @@ output_file = _writable(folder=False)
 output_folder = _writable(folder=True)
 
 
+def new_output_file(text: str) -> Path:
+    """An ``output_file`` that does not exist yet: for outputs that could replace a file of the user's,
+    such as a trained checkpoint, which posecons never replaces (README, "Errors and interrupts")."""
+    path = output_file(text)
+    if path.exists():
+        raise argparse.ArgumentTypeError(f"{path}: exists; give a new file name (posecons replaces no file of yours)")
+    return path
+
+
 def add_command(
     subparsers: argparse._SubParsersAction, name: str, func: Callable[[argparse.Namespace], int]
 ) -> argparse.ArgumentParser:

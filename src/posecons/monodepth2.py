@@ -27,7 +27,7 @@ from pathlib import Path
 
 import torch
 
-from .checkpoint import load_weights_file, save_checkpoint
+from .checkpoint import load_weights_file, save_checkpoint, save_safetensors
 from .config import Config
 from .errors import PoseconsError
 from .model import PoseConsModel
@@ -126,9 +126,14 @@ def read_monodepth2(folder: str | Path, map_location: str = "cpu") -> tuple[Conf
 
 def import_monodepth2(folder: str | Path, out: str | Path) -> str:
     """Write a Monodepth2 model folder as the posecons checkpoint ``out`` (atomically, after every
-    check); returns where its weights came from, in words."""
+    check): safetensors where its name ends in ``.safetensors``, as :func:`read_weights` reads it back,
+    else a ``.pt`` checkpoint; returns where its weights came from, in words."""
     config, state, origin = read_monodepth2(folder)
-    save_checkpoint(out, {"config": config.to_dict(), "model": state, "initialisation": f"imported: {origin}"})
+    initialisation = f"imported: {origin}"
+    if Path(out).suffix == ".safetensors":
+        save_safetensors(out, state, config, initialisation)
+    else:
+        save_checkpoint(out, {"config": config.to_dict(), "model": state, "initialisation": initialisation})
     return origin
 
 

@@ -3,10 +3,16 @@
 Stored as one ``.npz`` without pickles: float32 (H, W) maps under keys ``000000``, ``000001``, …
 in split order (0 = no ground truth; sizes may differ between dates) and a unicode array
 ``lines`` holding the split lines (``<folder> <frame> <side>``).
+
+Monodepth2's ``export_gt_depth.py`` writes ``np.savez_compressed(out, data=np.array(maps))``: the
+maps in its split's order and no lines. :func:`load_gt` reads that too; maps of several sizes make
+``data`` an array of arrays, stored as a pickle, which it unpickles allowing numpy arrays only.
 """
 
 from __future__ import annotations
 
+import pickle
+import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Literal, Optional
@@ -123,11 +129,14 @@ def write_gt(out: Path, maps: Sequence[np.ndarray], lines: Sequence[SplitLine]) 
         np.savez_compressed(f, **arrays)
 
 
-def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
-    """Read an exported ground-truth file: (list of float32 (H, W) maps, list of split lines)."""
+def load_gt(path: Path) -> tuple[list[np.ndarray], list[str] | None]:
+    """Read an exported ground-truth file: (list of float32 (H, W) maps, list of split lines), or
+    Monodepth2's ``gt_depths.npz`` (module doc): (its maps, None), the lines being its split file's."""
     path = require_file(Path(path), "ground-truth file")
     try:
         with np.load(path, allow_pickle=False) as data:
+            if data.files == ["data"]:
+                return _monodepth2_maps(path, data), None
             lines = [str(s) for s in data["lines"]]
             maps = [data[f"{i:06d}"] for i in range(len(lines))]
     except KeyError as exc:
@@ -135,6 +144,44 @@ def load_gt(path: Path) -> tuple[list[np.ndarray], list[str]]:
     except (OSError, ValueError) as exc:  # numpy's own text suggests unpickling, which is never wanted here
         raise PoseconsError(f"{path}: not a posecons ground-truth file (not an .npz written by export-gt)") from exc
     return maps, lines
+
+
+class _ArraysOnly(pickle.Unpickler):
+    """Unpickles numpy arrays and refuses every other class: an array of depth maps needs no other."""
+
+    ALLOWED = {
+        ("numpy", "ndarray"),
+        ("numpy", "dtype"),
+        ("numpy.core.multiarray", "_reconstruct"),  # the name numpy 1 wrote, numpy 2's numpy._core
+        ("numpy._core.multiarray", "_reconstruct"),
+    }
+
+    def find_class(self, module: str, name: str):
+        if (module, name) not in self.ALLOWED:
+            raise pickle.UnpicklingError(f"refused to unpickle {module}.{name}")
+        return super().find_class(module, name)
+
+
+def _monodepth2_maps(path: Path, data) -> list[np.ndarray]:
+    """The (H, W) maps of a Monodepth2 ``gt_depths.npz`` (``data``: it opened without pickles)."""
+    try:
+        maps = list(data["data"])  # maps of one size: one float array
+    except ValueError:  # maps of several sizes: an array of arrays, which only unpickling reads
+        maps = _unpickled_arrays(path)
+    if not maps or any(m.ndim != 2 or not np.issubdtype(m.dtype, np.floating) for m in maps):
+        raise PoseconsError(f"{path}: its 'data' holds no (H, W) depth maps, as Monodepth2's export_gt_depth.py writes")
+    return [m.astype(np.float32) for m in maps]
+
+
+def _unpickled_arrays(path: Path) -> list[np.ndarray]:
+    try:
+        with zipfile.ZipFile(path) as archive, archive.open("data.npy") as f:
+            version = np.lib.format.read_magic(f)
+            (np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0)(f)
+            data = _ArraysOnly(f, encoding="latin1").load()  # latin1: as numpy reads Python 2 pickles
+    except (pickle.UnpicklingError, EOFError, ValueError, OSError) as exc:
+        raise PoseconsError(f"{path}: not Monodepth2 ground truth ({exc})") from exc
+    return [np.asarray(m) for m in data] if isinstance(data, np.ndarray) else []
 
 
 class GroundTruth:

@@ -29,8 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--gt",
         type=Path,
         metavar="GT.npz",
-        help="exported ground truth (required with --pred-disps; "
-        "with --checkpoint it is exported on the fly when missing)",
+        help="exported ground truth, or Monodepth2's gt_depths.npz with its --split-file (required with "
+        "--pred-disps; with --checkpoint it is exported on the fly when missing)",
     )
     p.add_argument("--data-path", type=Path, help="KITTI raw root (with --checkpoint)")
     p.add_argument("--split-file", type=Path, help="split lines; gives the sequences (default: the GT's lines)")
@@ -93,7 +93,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--align",
         choices=pose.ALIGNMENTS,
         default="7dof",
-        help="alignment before t_err / r_err: Sim(3) (monocular) or SE(3) (metric: the devkit's own numbers)",
+        help="alignment before t_err / r_err: Sim(3) (monocular), SE(3) (metric: the devkit's own numbers) or "
+        "scale (one factor fitted on the positions, kitti-odom-eval's --align scale)",
     )
     _add_model_options(p)
     p.add_argument("--json", type=output_file, metavar="OUT", help="write the results as JSON")
@@ -126,8 +127,9 @@ def _predictor(args: argparse.Namespace):
     return load_predictor(args.checkpoint, args.device or "auto")
 
 
-def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str], Path]:
-    """GT depth maps, their split lines and the file they came from (exported into tmp if needed)."""
+def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray], list[str] | None, Path]:
+    """GT depth maps, their split lines (None: Monodepth2's file, which has none) and the file they
+    came from (exported into tmp if needed)."""
     from ..data.gt import export_gt, load_gt
 
     gt_path = args.gt
@@ -135,7 +137,11 @@ def _ground_truth(args: argparse.Namespace, tmp: Path) -> tuple[list[np.ndarray]
         gt_path = tmp / "gt_depths.npz"
         export_gt(args.data_path, args.split_file, gt_path, improved=args.gt_kind == "improved")
     gts, lines = load_gt(gt_path)
-    return list(gts), [str(line) for line in lines], gt_path
+    if lines is None and args.split_file is None:
+        raise PoseconsError(
+            f"{gt_path}: Monodepth2's ground truth names no frames; pass --split-file, the test_files.txt it was made from"
+        )
+    return list(gts), lines, gt_path
 
 
 def evaluate_depth_command(args: argparse.Namespace) -> int:
@@ -176,7 +182,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     split = read_split(args.split_file if args.split_file else gt_lines)
     if len(split) != len(gts):
         raise PoseconsError(f"{args.split_file} has {len(split)} lines but {gt_path} has {len(gts)} frames")
-    for line, stored in zip(split, read_split(gt_lines)):  # the same frames in the same order, not just as many
+    for line, stored in zip(split, read_split(gt_lines or [])):  # the same frames in the same order, not just as many
         if str(line) != str(stored):
             raise PoseconsError(
                 f"{line.where}: '{line}' does not match line '{stored}' that {gt_path} was "
@@ -236,6 +242,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
     from . import compare, evaluate
 
     gt = trajectory_io.read_kitti_poses(args.gt_poses)
+    n_gt_poses = len(gt)
     times = trajectory_io.read_times(args.times) if args.times else None
     if times is not None and len(times) != len(gt):
         raise PoseconsError(f"{args.times} has {len(times)} timestamps but {args.gt_poses} has {len(gt)} poses")
@@ -254,11 +261,19 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
         checkpoint = describe_checkpoint(args.checkpoint)
     else:
         estimate, source = trajectory_io.read_kitti_poses(args.pred_poses), str(args.pred_poses)
-        if len(estimate) != len(gt):
+        if len(estimate) > len(gt):
             raise PoseconsError(f"{args.pred_poses} has {len(estimate)} poses but {args.gt_poses} has {len(gt)}")
+        if len(estimate) < len(gt):  # kitti-odom-eval scores the frames a prediction has
+            print(
+                f"scoring the first {len(estimate)} of the {len(gt)} poses of {args.gt_poses}: "
+                f"{args.pred_poses} has {len(estimate)} (as kitti-odom-eval does)"
+            )
+            gt = gt[: len(estimate)]
+            times = None if times is None else times[: len(estimate)]
         checkpoint = None
 
     result = evaluate.evaluate_pose(estimate, gt, args.const_velocity, source, str(args.gt_poses), args.align)
+    result.update(n_gt_poses=n_gt_poses)  # of which the first n_frames were scored
     if checkpoint:
         result.update(checkpoint=checkpoint)
         print(f"weights: {compare.checkpoint_note(checkpoint)}")

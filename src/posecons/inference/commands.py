@@ -8,7 +8,15 @@ import json
 import sys
 from pathlib import Path
 
-from ..cli import add_command, device_name, non_negative_float, output_file, output_folder, positive_float, positive_int
+from ..cli import (
+    add_command,
+    device_name,
+    new_output_file,
+    non_negative_float,
+    output_folder,
+    positive_float,
+    positive_int,
+)
 from .media import DEFAULT_FPS
 
 
@@ -81,7 +89,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     m = add_command(subparsers, "import-monodepth2", import_monodepth2_command)
     m.add_argument("folder", type=Path, help="Monodepth2 model folder, e.g. models/mono_640x192")
-    m.add_argument("--out", required=True, type=output_file, help="checkpoint to write (.pt)")
+    m.add_argument(
+        "--out",
+        required=True,
+        type=new_output_file,
+        help="checkpoint to write, a new file: .safetensors writes safetensors, any other name a .pt checkpoint",
+    )
 
 
 def predict_command(args: argparse.Namespace) -> int:
@@ -149,8 +162,9 @@ def import_monodepth2_command(args: argparse.Namespace) -> int:
     """a Monodepth2 model folder → a posecons checkpoint (same networks, same outputs)
 
     Read a Monodepth2 model folder (encoder.pth, depth.pth, and pose_encoder.pth + pose.pth of a mono or
-    mono+stereo model) into a posecons checkpoint for evaluate-depth, evaluate-pose, predict, export or
-    train --init-from. A stereo-only model gives its depth network only."""
+    mono+stereo model) into a posecons checkpoint (.pt) or safetensors file (.safetensors) for
+    evaluate-depth, evaluate-pose, predict, export or train --init-from. A stereo-only model gives its
+    depth network only."""
     from ..monodepth2 import import_monodepth2
 
     print(f"imported {import_monodepth2(args.folder, args.out)} → {args.out}")  # says when only depth is

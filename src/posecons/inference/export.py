@@ -113,7 +113,7 @@ def export_model(checkpoint: str | Path, out: str | Path, tolerance: float = 1e-
             raise PoseconsError(
                 f"{checkpoint}: ONNX Runtime differs from PyTorch by {worst:.3g} (tolerance {tolerance:g}): {diffs}"
             )
-        save_safetensors(tmp / WEIGHTS, model, config)
+        save_safetensors(tmp / WEIGHTS, model.state_dict(), config)
         info = {
             "checkpoint": str(checkpoint),
             "height": h,

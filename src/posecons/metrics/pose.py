@@ -17,7 +17,7 @@ from ..errors import PoseconsError
 SNIPPET_LENGTH = 5  # frames per snippet in the published protocol (4 relative poses)
 KITTI_SEGMENT_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)  # metres, the odometry devkit's
 KITTI_FIRST_FRAME_STEP = 10  # the devkit starts a segment at every 10th frame (one a second at 10 Hz)
-ALIGNMENTS = ("7dof", "6dof")  # of the prediction to GT before t_err / r_err, as VO papers name them
+ALIGNMENTS = ("7dof", "6dof", "scale")  # of the prediction to GT before t_err / r_err, as kitti-odom-eval names them
 CONST_VELOCITY_MODES = ("first", "previous")
 
 
@@ -157,6 +157,16 @@ def align_trajectory(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, floa
     return apply_sim3(pred, scale, R, t), scale
 
 
+def scale_alignment(pred: np.ndarray, gt: np.ndarray) -> float:
+    """kitti-odom-eval's ``scale`` alignment of (N, 4, 4) poses: one factor s, no rotation or translation,
+    minimising Σ‖g_i − s·p_i‖² over the positions p_i, g_i of the poses taken relative to their first
+    (inv(P_0)·P_i, inv(G_0)·G_i, as that toolbox does first): s = Σ g_i·p_i / Σ p_i·p_i."""
+    p = (np.linalg.inv(pred[0]) @ pred)[:, :3, 3]
+    g = (np.linalg.inv(gt[0]) @ gt)[:, :3, 3]
+    norm = np.sum(p * p)
+    return float(np.sum(g * p) / norm) if norm > 0 else 1.0
+
+
 def ate_rmse(pred_aligned: np.ndarray, gt: np.ndarray) -> float:
     """RMSE (m) of the position errors of aligned (N, 4, 4) poses."""
     return float(np.sqrt(np.mean(np.sum((pred_aligned[:, :3, 3] - gt[:, :3, 3]) ** 2, axis=1))))
@@ -200,9 +210,11 @@ def odometry_errors(pred: np.ndarray, gt: np.ndarray, alignment: str = "7dof") -
     """The KITTI odometry devkit's t_err (%) and r_err (°/100 m) of (N, 4, 4) camera → world poses.
 
     ``7dof``: the prediction is first Sim(3)-aligned to GT on its positions (Umeyama), the usual choice
-    for monocular methods; ``6dof``: SE(3), for a prediction in metres. Only the scale of an alignment
-    matters here: a rigid change of world frame leaves every relative motion inv(P_i)·P_j as it is, so
-    6-DoF gives the devkit's own numbers (the devkit aligns nothing) and is not computed.
+    for monocular methods; ``6dof``: SE(3), for a prediction in metres; ``scale``: one factor fitted on
+    the positions alone (:func:`scale_alignment`, kitti-odom-eval's ``--align scale``), which some
+    papers report. Only the scale of an alignment matters here: a rigid change of world frame leaves
+    every relative motion inv(P_i)·P_j as it is, so 6-DoF gives the devkit's own numbers (the devkit
+    aligns nothing) and is not computed, and ``scale`` multiplies the translations by its factor.
     Then :func:`segment_errors` over :func:`segment_lengths`; t_err and r_err are the means over all
     segments, every length pooled (the devkit's overall average, not a mean of per-length means).
     ``devkit_lengths`` is False on a path under 100 m, whose fractional lengths no paper uses.
@@ -215,6 +227,10 @@ def odometry_errors(pred: np.ndarray, gt: np.ndarray, alignment: str = "7dof") -
     scale = 1.0
     if alignment == "7dof":
         pred, scale = align_trajectory(pred, gt)
+    elif alignment == "scale":
+        scale = scale_alignment(pred, gt)
+        pred = pred.copy()
+        pred[:, :3, 3] *= scale
     path = float(np.sum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1)))
     lengths, step = segment_lengths(path) if path > 0 else ([], 1)
     trans, rot = segment_errors(pred, gt, lengths, step)
