@@ -171,30 +171,14 @@ def _flat(config) -> dict:
     return {f"{part}.{key}": value for part, values in config.to_dict().items() for key, value in values.items()}
 
 
-def test_the_recommended_preset_is_the_measured_setting_on_the_paper_baseline():
-    """kitti/recommended ships what docs/results.md §7 measured as farrot_wall2000 (the far pixels'
-    rotation, the decoder factor 0.1, the wall, and the spec's 0.99 EMA), nothing more: the preset
-    differs from kitti/baseline in exactly the options the study set on top of its baseline, the run
-    length (max_steps, the study's stopping rule) and the study's own precision aside."""
-    spec = yaml.safe_load((REPO / "experiments/specs/synth_open_wall.yaml").read_text())
-    measured = [*spec["overrides"], *spec["variants"]["farrot_wall2000"]]
-    study = load_config(resolve_preset(spec["preset"]), measured)
-    study_baseline = load_config(resolve_preset(spec["preset"]), [*spec["overrides"], *spec["variants"]["baseline"]])
-    before = _flat(study_baseline)
-    added = {k: v for k, v in _flat(study).items() if before[k] != v}
-    added.pop("train.max_steps")
-    added["train.ema_decay"] = study.train.ema_decay  # in both study runs; the baseline preset has none
-    baseline, recommended = (
-        _flat(load_config(resolve_preset("kitti/baseline"))),
-        _flat(load_config(resolve_preset("kitti/recommended"))),
-    )
-    assert {k: v for k, v in recommended.items() if baseline[k] != v} == added
-    assert added.keys() == {
-        "model.pose_rotation_scale",
-        "loss.far_rotation_weight",
-        "loss.saturation_weight",
-        "train.ema_decay",
-    }
+def test_the_recommended_presets_are_the_paper_baseline_until_a_term_beats_it_at_equal_length():
+    """kitti/recommended is kitti/baseline to the last option, and custom/video is that on the custom
+    split: the far pixels' rotation was not shown to beat the baseline trained as long (docs/results.md
+    §7), so no preset turns it, the wall or an EMA on; a term put back into either fails here."""
+    baseline = _flat(load_config(resolve_preset("kitti/baseline")))
+    assert _flat(load_config(resolve_preset("kitti/recommended"))) == baseline
+    video = _flat(load_config(resolve_preset("custom/video")))
+    assert {k: v for k, v in video.items() if baseline[k] != v} == {"data.split": "custom"}
 
 
 def test_the_presets_still_train_every_committed_study_run():
