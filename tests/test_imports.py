@@ -69,7 +69,7 @@ def _find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 
 def test_the_graph_sees_the_package():
     graph = _import_graph()
-    assert "posecons.training.demo" in graph and "posecons.config" in graph["posecons.training.demo"]
+    assert "posecons.cli.demo" in graph and "posecons.config" in graph["posecons.cli.demo"]
     assert "posecons.inference.backend" in graph["posecons.evaluation.evaluate"]
 
 
