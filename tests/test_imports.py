@@ -1,4 +1,5 @@
-"""Layering: no module of the package imports (directly or through others) a module that imports it back.
+"""Layering: no module of the package imports (directly or through others) a module that imports it back,
+and only the CLI parses arguments.
 
 The graph is read from the source with ``ast``, including imports inside functions (a lazy import
 still ties two modules together). Importing ``posecons.a.b`` also runs ``posecons/a/__init__.py``,
@@ -18,30 +19,36 @@ def _module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _import_graph() -> dict[str, set[str]]:
+def _imports() -> dict[str, set[str]]:
+    """The modules each module of the package imports, by absolute name (the standard library's too)."""
     files = {_module_name(p): p for p in (SRC / "posecons").rglob("*.py")}
-    graph: dict[str, set[str]] = {name: set() for name in files}
+    imports: dict[str, set[str]] = {name: set() for name in files}
     for name, path in files.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.Import):
-                targets = [alias.name for alias in node.names]
+                imports[name].update(alias.name for alias in node.names)
             elif isinstance(node, ast.ImportFrom):
                 base = node.module or ""
                 if node.level:
                     anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
                     base = ".".join(anchor + ([base] if base else []))
                 # `from pkg import sub` imports the submodule pkg.sub when there is one
-                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in files else base for a in node.names]
-            else:
-                continue
-            for target in targets:
-                parts = target.split(".")
-                for i in range(1, len(parts) + 1):
-                    module = ".".join(parts[:i])
-                    is_ancestor = name == module or name.startswith(module + ".")
-                    if module in files and not is_ancestor:
-                        graph[name].add(module)
+                imports[name].update(f"{base}.{a.name}" if f"{base}.{a.name}" in files else base for a in node.names)
+    return imports
+
+
+def _import_graph() -> dict[str, set[str]]:
+    imports = _imports()
+    graph: dict[str, set[str]] = {name: set() for name in imports}
+    for name, targets in imports.items():
+        for target in targets:
+            parts = target.split(".")
+            for i in range(1, len(parts) + 1):
+                module = ".".join(parts[:i])
+                is_ancestor = name == module or name.startswith(module + ".")
+                if module in imports and not is_ancestor:
+                    graph[name].add(module)
     return graph
 
 
@@ -82,3 +89,21 @@ def test_core_maths_import_no_file_formats_plots_or_commands():
     graph = _import_graph()
     for core in ("posecons.metrics.depth", "posecons.metrics.pose", "posecons.geometry"):
         assert graph[core] <= {"posecons.errors"}, (core, graph[core])
+
+
+def _in(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+def test_only_the_cli_parses_arguments_or_imports_the_cli():
+    """The CLI sits on top: argparse and ``posecons.cli`` are imported in ``posecons.cli`` only. Caught
+    mutations: ``import argparse`` in study/worker.py; ``from ..cli.arguments import positive_int`` in
+    training/trainer.py."""
+    wrong = [
+        (name, target)
+        for name, targets in sorted(_imports().items())
+        if not _in(name, "posecons.cli")
+        for target in sorted(targets)
+        if _in(target, "argparse") or _in(target, "posecons.cli")
+    ]
+    assert not wrong, "; ".join(f"{name} imports {target}" for name, target in wrong)
