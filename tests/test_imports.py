@@ -9,6 +9,7 @@ so that is an edge too, unless the package is an ancestor of the importer (alrea
 from __future__ import annotations
 
 import ast
+from collections.abc import Callable
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -95,15 +96,29 @@ def _in(module: str, package: str) -> bool:
     return module == package or module.startswith(package + ".")
 
 
+def _banned(edges: dict[str, set[str]], importer: Callable[[str], bool], banned: tuple[str, ...]) -> list[str]:
+    """Each edge of ``edges`` from an ``importer`` module into a ``banned`` package, as "A imports B"."""
+    return [
+        f"{name} imports {target}"
+        for name in sorted(edges)
+        if importer(name)
+        for target in sorted(edges[name])
+        if any(_in(target, package) for package in banned)
+    ]
+
+
 def test_only_the_cli_parses_arguments_or_imports_the_cli():
     """The CLI sits on top: argparse and ``posecons.cli`` are imported in ``posecons.cli`` only. Caught
     mutations: ``import argparse`` in study/worker.py; ``from ..cli.arguments import positive_int`` in
     training/trainer.py."""
-    wrong = [
-        (name, target)
-        for name, targets in sorted(_imports().items())
-        if not _in(name, "posecons.cli")
-        for target in sorted(targets)
-        if _in(target, "argparse") or _in(target, "posecons.cli")
-    ]
-    assert not wrong, "; ".join(f"{name} imports {target}" for name, target in wrong)
+    wrong = _banned(_imports(), lambda name: not _in(name, "posecons.cli"), ("argparse", "posecons.cli"))
+    assert not wrong, "; ".join(wrong)
+
+
+def test_training_imports_no_evaluation_or_inference():
+    """Training sits below evaluation and inference; the demo, which runs all three, is the CLI's.
+    Caught mutation: ``from ..evaluation import evaluate`` in training/trainer.py."""
+    wrong = _banned(
+        _import_graph(), lambda name: _in(name, "posecons.training"), ("posecons.evaluation", "posecons.inference")
+    )
+    assert not wrong, "; ".join(wrong)
