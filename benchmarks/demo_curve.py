@@ -16,12 +16,12 @@ import json
 import time
 from pathlib import Path
 
+from posecons.cli.demo import SYNTH
 from posecons.config import load_config, resolve_preset
 from posecons.data.gt import export_gt
 from posecons.data.splits import read_split
 from posecons.data.synth import generate_synth
 from posecons.evaluation import evaluate
-from posecons.training.demo import SYNTH
 from posecons.training.trainer import train
 
 

@@ -51,10 +51,10 @@ def test_every_option_with_a_default_shows_it():
 
 def test_train_on_several_devices_relaunches_the_argv_given_to_main(monkeypatch, tmp_path):
     """Caught mutation: ``_launch_torchrun`` passing on ``sys.argv[1:]`` (pytest's own arguments here)."""
-    from posecons.training import commands
+    from posecons.cli import training
 
     launched = []
-    monkeypatch.setattr(commands.subprocess, "call", lambda cmd: launched.append(cmd) or 0)
+    monkeypatch.setattr(training.subprocess, "call", lambda cmd: launched.append(cmd) or 0)
     monkeypatch.delenv("WORLD_SIZE", raising=False)
     argv = ["train", "--config", "kitti/cycle", "--data-path", str(tmp_path), "--out", str(tmp_path / "run")]
     argv += ["--devices", "2", "--set", "train.max_steps=1"]

@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from posecons.checkpoint import save_checkpoint
+from posecons.cli.demo import run_demo
 from posecons.config import load_config, resolve_preset
 from posecons.errors import Collapsed
 from posecons.training.collapse import FLAT_SPREAD, CollapseWatch, collapse_signs, problems
-from posecons.training.demo import run_demo
 from posecons.training.initial_weights import initial_model
 from posecons.training.trainer import train
 from tiny import TINY_MODEL

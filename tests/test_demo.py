@@ -6,8 +6,8 @@ import json
 import pytest
 import torch
 
+from posecons.cli.demo import recipe, run_demo
 from posecons.config import load_config, resolve_preset
-from posecons.training.demo import recipe, run_demo
 from posecons.training.precision import resolve_precision
 
 pytestmark = pytest.mark.slow

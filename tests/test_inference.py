@@ -23,12 +23,12 @@ from posecons.data.synth import drive_folder, generate_synth
 from posecons.data.trajectory_io import read_kitti_poses, read_tum
 from posecons.fileio import MANIFEST
 from posecons.geometry import backproject, pose_vec_to_mat
-from posecons.inference import PredictOptions, export_model, load_predictor, predict
-from posecons.inference.backend import Predictor
+from posecons.inference.backend import Predictor, load_predictor
 from posecons.inference.camera import resolve_intrinsics
+from posecons.inference.export import export_model
 from posecons.inference.media import FrameSource
 from posecons.inference.pointcloud import depth_to_points, read_ply, write_ply
-from posecons.inference.predict import gt_scale
+from posecons.inference.predict import PredictOptions, gt_scale, predict
 from posecons.inference.scale import camera_height
 from posecons.model import PoseConsModel
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from posecons.cli import positive_int
+from posecons.cli.arguments import positive_int
 from posecons.data.calib import normalised_to_pixel, raw_intrinsics
 from posecons.data.gt import load_gt
 from posecons.data.splits import SIDE_TO_CAMERA

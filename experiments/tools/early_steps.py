@@ -19,7 +19,7 @@ import itertools
 import tempfile
 from pathlib import Path
 
-from posecons.cli import add_overrides
+from posecons.cli.arguments import add_overrides
 from posecons.config import load_config, resolve_preset
 from posecons.errors import PoseconsError
 from posecons.training.collapse import collapse_signs

@@ -393,12 +393,16 @@ def _run_side_by_side(
             run_dir = out / "runs" / variant / f"seed{seed}"
             run_dir.mkdir(parents=True, exist_ok=True)
             log = open(run_dir / "study.log", "a")  # noqa: SIM115 (closed when the run ends)
-            command = [sys.executable, "-m", "posecons.study.worker", str(spec.file), str(out), variant, str(seed)]
-            command += ["--accelerator", accelerator]
-            # The data roots as the spec resolved them (--data-path and --odometry-path included).
-            data_path = spec.data.get("path") or spec.data.get("rgbd", {}).get("input")
-            command += [f"--data-path={data_path}"] if data_path else []
-            command += [f"--odometry-path={spec.data['odometry']}"] if "odometry" in spec.data else []
+            job = {  # worker.run's arguments; the data roots as the spec resolved them (--data-path included)
+                "spec": str(spec.file),
+                "out": str(out),
+                "variant": variant,
+                "seed": seed,
+                "accelerator": accelerator,
+                "data_path": spec.data.get("path") or spec.data.get("rgbd", {}).get("input"),
+                "odometry_path": spec.data.get("odometry"),
+            }
+            command = [sys.executable, "-m", "posecons.study.worker", json.dumps(job)]
             env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
             proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
             unsignalled[variant, seed], started = proc, time.monotonic()

@@ -1,4 +1,4 @@
-"""`posecons train` and `posecons demo`."""
+"""`posecons train` and `posecons demo` (its steps are in :mod:`.demo`, imported when it runs: torch)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..cli import add_accelerator, add_command, add_overrides, non_negative_int, output_folder, positive_int
 from ..config import load_config, resolve_preset
 from ..errors import PoseconsError
+from .arguments import add_accelerator, add_command, add_overrides, non_negative_int, output_folder, positive_int
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -93,7 +93,7 @@ def train_command(args: argparse.Namespace) -> int:
     config = _config(args)  # validate before anything starts, also before launching workers
     if (args.devices > 1 or args.nodes > 1) and "WORLD_SIZE" not in os.environ:
         return _launch_torchrun(args)
-    from .trainer import train
+    from ..training.trainer import train
 
     summary = train(
         config,

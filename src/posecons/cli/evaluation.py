@@ -1,5 +1,5 @@
 """Sub-commands ``evaluate-depth``, ``evaluate-pose`` and ``compare``: argument checks and printing
-over :mod:`.evaluate` and :mod:`.compare`."""
+over :mod:`posecons.evaluation.evaluate` and :mod:`posecons.evaluation.compare`."""
 
 from __future__ import annotations
 
@@ -9,12 +9,20 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli import add_command, device_name, non_negative_int, output_file, output_folder, positive_float, positive_int
 from ..errors import PoseconsError
 from ..fileio import atomic_write, write_json, write_text
 
 # metrics are light (numpy); the evaluation runs, torch and the data layer load inside the commands.
 from ..metrics import depth, pose
+from .arguments import (
+    add_command,
+    device_name,
+    non_negative_int,
+    output_file,
+    output_folder,
+    positive_float,
+    positive_int,
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -150,7 +158,7 @@ def evaluate_depth_command(args: argparse.Namespace) -> int:
     Evaluate predicted disparities (or a model) against ground-truth depth."""
     from ..checkpoint import describe_checkpoint
     from ..data.splits import read_split
-    from . import compare, evaluate
+    from ..evaluation import compare, evaluate
 
     if args.checkpoint is None and args.gt is None:
         raise PoseconsError("--pred-disps needs --gt (an exported ground-truth .npz)")
@@ -239,7 +247,7 @@ def evaluate_pose_command(args: argparse.Namespace) -> int:
 
     Evaluate predicted ego-motion against KITTI odometry poses."""
     from ..data import trajectory_io
-    from . import compare, evaluate
+    from ..evaluation import compare, evaluate
 
     gt = trajectory_io.read_kitti_poses(args.gt_poses)
     n_gt_poses = len(gt)
@@ -294,7 +302,7 @@ def compare_command(args: argparse.Namespace) -> int:
     """Markdown table (paper's Table 1 layout) from depth JSONs
 
     Compare depth evaluations; a run directory means <run>/eval/depth.json."""
-    from . import compare
+    from ..evaluation import compare
 
     results = [compare.load_result(path) for path in args.results]
     names = args.names or [compare.default_name(path) for path in args.results]

@@ -1,34 +1,16 @@
-"""`posecons` command line: a thin layer over the library.
-
-Each area registers its own sub-commands through ``register(subparsers)`` in its
-``commands`` module, so the CLI file never grows with the library. Those modules import the
-heavy libraries (torch, matplotlib, av, onnx) inside the commands only, so ``--help``,
-``--version`` and usage errors answer at once.
-"""
+"""The argument types and helpers the sub-commands share: a bad value is a usage error naming the option."""
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import inspect
 import math
 import re
-import signal
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from . import __version__
-from .errors import PoseconsError
-from .fileio import check_writable
-
-COMMAND_MODULES = (
-    "posecons.data.commands",
-    "posecons.training.commands",
-    "posecons.evaluation.commands",
-    "posecons.inference.commands",
-    "posecons.study.commands",
-)
+from ..errors import PoseconsError
+from ..fileio import check_writable
 
 
 def _number(kind: type, test: Callable[[float], bool], rule: str) -> Callable[[str], float]:
@@ -133,44 +115,3 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = Parser(prog="posecons", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"posecons {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
-    for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name != name:  # a real missing dependency, not an area still to come
-                raise
-            continue
-        module.register(sub)
-    return parser
-
-
-def _message(exc: PoseconsError) -> str:
-    """The error's one line; one re-raised by a DataLoader worker carries the worker's traceback."""
-    text = str(exc)
-    if text.startswith(f"Caught {type(exc).__name__} in DataLoader worker"):
-        text = text.rstrip().splitlines()[-1].split(f"{type(exc).__name__}: ", 1)[-1]
-    return text
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser().parse_args(argv)
-    args.argv = argv  # what a command that re-executes itself (train --devices N) passes on
-    try:
-        return int(args.func(args) or 0)
-    except PoseconsError as exc:
-        print(f"posecons {args.command}: error: {_message(exc)}", file=sys.stderr)
-        return getattr(exc, "exit_code", 2)
-    except KeyboardInterrupt:  # Ctrl-C outside a training loop (which handles it itself): no traceback
-        print(f"posecons {args.command}: interrupted", file=sys.stderr)
-        return 128 + signal.SIGINT
-
-
-if __name__ == "__main__":
-    sys.exit(main())

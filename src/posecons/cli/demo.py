@@ -22,8 +22,8 @@ from ..evaluation import evaluate
 from ..evaluation.compare import checkpoint_note, result_cells, table1
 from ..fileio import write_json, write_text
 from ..plots import plot_scales_over_time, plot_validation
-from .initial_weights import save_initial_weights
-from .trainer import train
+from ..training.initial_weights import save_initial_weights
+from ..training.trainer import train
 
 # The demo's synthetic data set: small frames keep decoding cheap on a 2-core CPU.
 SYNTH = {"drives": 6, "frames": 120, "width": 384, "height": 128, "neighbours": 3}

@@ -1,5 +1,6 @@
 """`posecons predict`, `posecons export` and `posecons import-monodepth2`: thin wrappers over
-:mod:`.predict`, :mod:`.export` and :mod:`posecons.monodepth2`."""
+:mod:`posecons.inference.predict`, :mod:`posecons.inference.export` and
+:mod:`posecons.monodepth2`."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import json
 import sys
 from pathlib import Path
 
-from ..cli import (
+from ..inference.media import DEFAULT_FPS
+from .arguments import (
     add_command,
     device_name,
     new_output_file,
@@ -17,7 +19,6 @@ from ..cli import (
     positive_float,
     positive_int,
 )
-from .media import DEFAULT_FPS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -103,11 +104,8 @@ def predict_command(args: argparse.Namespace) -> int:
     Depth for every frame (.npy, 16-bit PNG, colour PNG, side-by-side MP4 for video), a trajectory
     (KITTI and TUM) and optional point clouds. Outputs are staged inside OUT and moved into place at the
     end."""
-    from . import (  # the package's lazy names (not the submodule)
-        PredictOptions,
-        load_predictor,
-        predict,
-    )
+    from ..inference.backend import load_predictor
+    from ..inference.predict import PredictOptions, predict
 
     options = PredictOptions(
         batch_size=args.batch_size,
@@ -150,7 +148,7 @@ def predict_command(args: argparse.Namespace) -> int:
 
 def export_command(args: argparse.Namespace) -> int:
     """depth and pose networks to ONNX (verified) and safetensors"""
-    from .export import export_model
+    from ..inference.export import export_model
 
     info = export_model(args.checkpoint, args.out, tolerance=args.tolerance)
     print(json.dumps(info["max_abs_diff"], indent=2))

@@ -1,12 +1,12 @@
-"""``posecons study``: argument checks and printing over :mod:`.runner` and :mod:`.report`."""
+"""``posecons study``: argument checks and printing over :mod:`posecons.study.runner` and :mod:`posecons.study.report`."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from ..cli import add_accelerator, add_command, non_negative_int, output_file, output_folder, positive_int
 from ..errors import PoseconsError
+from .arguments import add_accelerator, add_command, non_negative_int, output_file, output_folder, positive_int
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -51,8 +51,8 @@ def study_command(args: argparse.Namespace) -> int:
         raise PoseconsError("--results is for --report-only (a study writes its results into OUT/results)")
     if not (args.spec and args.out):
         raise PoseconsError("a study needs --spec and --out (or --report-only to rebuild a report)")
-    from .runner import run_study
-    from .spec import load_spec
+    from ..study.runner import run_study
+    from ..study.spec import load_spec
 
     spec = load_spec(args.spec, args.data_path, args.odometry_path).select(args.variants, args.seeds)
     report = args.report or args.out / "results.md"
@@ -62,8 +62,8 @@ def study_command(args: argparse.Namespace) -> int:
 
 
 def _report_only(args: argparse.Namespace) -> int:
-    from .report import write_report
-    from .spec import load_spec
+    from ..study.report import write_report
+    from ..study.spec import load_spec
 
     if args.results is None and args.out is None:
         raise PoseconsError("--report-only needs --results DIR (a folder of study JSONs) or --out")

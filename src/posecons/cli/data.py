@@ -6,7 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..cli import (
+from ..errors import PoseconsError
+from .arguments import (
     add_command,
     add_overrides,
     field_of_view,
@@ -19,7 +20,6 @@ from ..cli import (
     positive_float,
     positive_int,
 )
-from ..errors import PoseconsError
 
 GUESS_FOV = 60.0  # degrees: a typical dashcam's horizontal field of view (50–70°), when none is given
 PIXEL_INTRINSICS = ("fx", "fy", "cx", "cy")
@@ -191,8 +191,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _synth(args: argparse.Namespace) -> int:
     """write a synthetic KITTI-like dataset (raw + odometry + splits)"""
-    from .splits import read_split
-    from .synth import generate_synth
+    from ..data.splits import read_split
+    from ..data.synth import generate_synth
 
     info = generate_synth(
         args.out,
@@ -217,7 +217,7 @@ def _synth(args: argparse.Namespace) -> int:
 
 def _export_gt(args: argparse.Namespace) -> int:
     """export the ground-truth depth of a split to .npz"""
-    from .gt import export_gt
+    from ..data.gt import export_gt
 
     count = export_gt(args.data_path, args.split_file, args.out, args.improved, args.improved_root, args.depth)
     print(f"wrote {count} depth maps to {args.out}")
@@ -249,8 +249,8 @@ def _pixel_intrinsics(args: argparse.Namespace, alternative: str):
 
 def _prepare(args: argparse.Namespace) -> int:
     """turn videos or frame folders into a KITTI-raw-layout dataset"""
-    from .calib import read_calib_intrinsics
-    from .prepare import prepare
+    from ..data.calib import read_calib_intrinsics
+    from ..data.prepare import prepare
 
     given = [getattr(args, n) for n in PIXEL_INTRINSICS]
     sources = ["--fx --fy --cx --cy" if any(v is not None for v in given) else "", "--calib" * (args.calib is not None)]
@@ -282,8 +282,8 @@ def _prepare_rgbd(args: argparse.Namespace) -> int:
     The prepare layout of the colour frames, plus OUT/gt_depths.npz (their depth in metres, for
     evaluate-depth --gt-kind dense) and, with poses, OUT/odometry (for evaluate-pose). Patterns are
     relative to --input; their one * is the frame's name, which pairs a colour frame with its files."""
-    from .calib import read_intrinsics
-    from .rgbd import INVALID_DEPTH, RGBDSource, prepare_rgbd
+    from ..data.calib import read_intrinsics
+    from ..data.rgbd import INVALID_DEPTH, RGBDSource, prepare_rgbd
 
     k = _pixel_intrinsics(args, "--calib FILE")
     if k is not None and args.calib is not None:
@@ -318,7 +318,7 @@ def _cache(args: argparse.Namespace) -> int:
     import os
 
     from ..config import load_config, resolve_preset
-    from .cache_build import build_cache
+    from ..data.cache_build import build_cache
 
     config = load_config(resolve_preset(args.config), args.overrides)
     workers = args.workers or min(2, os.cpu_count() or 1)
@@ -333,7 +333,7 @@ def _cache(args: argparse.Namespace) -> int:
 
 def _build_split(args: argparse.Namespace) -> int:
     """build a Zhou-style train/val split from a KITTI raw tree"""
-    from .splits import build_split, read_static_frames, read_test_scenes, write_split
+    from ..data.splits import build_split, read_static_frames, read_test_scenes, write_split
 
     static = read_static_frames(args.static_frames) if args.static_frames else set()
     scenes = read_test_scenes(args.test_scenes) if args.test_scenes else set()
