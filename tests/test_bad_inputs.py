@@ -455,9 +455,9 @@ CASES = [
         ["--align", "'5dof'"],
     ),
     (
-        "evaluate-pose-count-mismatch",
-        "evaluate-pose --pred-poses {in}/two_poses.txt --gt-poses {syn}/odometry/poses/01.txt",
-        ["two_poses.txt has 2"],
+        "evaluate-pose-longer-than-gt",  # a shorter prediction is scored on its frames; a longer one is refused
+        "evaluate-pose --pred-poses {syn}/odometry/poses/01.txt --gt-poses {in}/two_poses.txt",
+        ["01.txt has", "two_poses.txt has 2"],
     ),
     (
         "evaluate-pose-times-mismatch",
