@@ -142,10 +142,6 @@ class ModelConfig:
     # rotation of 0.2 rad then needs an output of 20, which a scratch net reaches slowly; the translation
     # needs no such size, its scale being free
     pose_rotation_scale: float = 0.01
-    # Start the pose decoder's last layer at zero, so that the untrained net predicts no motion for every
-    # pair and the first updates take their direction from the photometric gradient, not from the
-    # random sign of an untrained output (experiments/investigation.md §3, §30)
-    pose_zero_init: bool = False
     # Warp with the data set's true camera motion (raw: oxts/ through the date's calibration files;
     # odometry: poses/NN.txt) instead of the pose net's. Not self-supervised: the depth learns metres
     # (set min/max_depth in metres) and the pose net is not trained, so no pose-net loss may be on

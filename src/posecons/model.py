@@ -94,9 +94,7 @@ class PoseConsModel(nn.Module):
         m = config.model
         imagenet = load_imagenet_state(m.num_layers, m.pretrained)  # fetched once for both encoders
         self.depth_net = DepthNet(m.num_layers, imagenet, tuple(m.scales))
-        self.pose_net = PoseNet(
-            m.num_layers, imagenet, m.pose_mirror, rotation_scale=m.pose_rotation_scale, zero_init=m.pose_zero_init
-        )
+        self.pose_net = PoseNet(m.num_layers, imagenet, mirror=m.pose_mirror, rotation_scale=m.pose_rotation_scale)
         self.photometric_error = (
             _CompiledOrEager(photometric_error) if config.train.compile_losses else photometric_error
         )

@@ -281,7 +281,7 @@ class PoseDecoder(nn.Module):
     """Deepest pose-encoder feature → (axis-angle (B, 1, 3), translation (B, 1, 3)), scaled by
     ``rotation_scale`` and 0.01 (Monodepth2: 0.01 both)."""
 
-    def __init__(self, num_ch_in: int, rotation_scale: float = 0.01, zero_init: bool = False):
+    def __init__(self, num_ch_in: int, rotation_scale: float = 0.01):
         super().__init__()
         self.rotation_scale = rotation_scale
         self.net = nn.Sequential(
@@ -293,9 +293,6 @@ class PoseDecoder(nn.Module):
             nn.ReLU(inplace=True),
             nn.Conv2d(256, 6, 1),
         )
-        if zero_init:  # the identity motion for every input until the first update
-            nn.init.zeros_(self.net[-1].weight)
-            nn.init.zeros_(self.net[-1].bias)
 
     def forward(self, feature: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         out = fp32_output(self.net[-1], self.net[:-1](feature)).mean((2, 3)).view(-1, 1, 6)
@@ -323,17 +320,12 @@ class PoseNet(nn.Module):
     """Ordered frame pair (a, b), each (B, 3, H, W) → T_{b←a} as (axis-angle, translation)."""
 
     def __init__(
-        self,
-        num_layers: int = 18,
-        imagenet: dict | None = None,
-        mirror: bool = False,
-        rotation_scale: float = 0.01,
-        zero_init: bool = False,
+        self, num_layers: int = 18, imagenet: dict | None = None, mirror: bool = False, rotation_scale: float = 0.01
     ):
         super().__init__()
         self.encoder = ResnetEncoder(num_layers, imagenet, num_input_images=2, grouped=True)
         self.mirror = mirror
-        self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1], rotation_scale, zero_init)
+        self.decoder = PoseDecoder(self.encoder.num_ch_enc[-1], rotation_scale)
 
     def forward(
         self,
