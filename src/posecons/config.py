@@ -122,6 +122,7 @@ RETIRED = {  # "section.key": (the value every run now has, that commit)
     "model.constraint_norm": ("own", "1be435b"),
     "loss.constraint_fraction": (1.0, "1be435b"),
     "loss.translation_norm": ("sum", "1be435b"),
+    "model.pose_zero_init": (False, "7f7a6ba"),
 }
 
 
