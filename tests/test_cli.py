@@ -36,6 +36,13 @@ def test_version(capsys):
     assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"posecons {__version__}"
 
 
+def test_the_removed_stabiliser_is_an_unknown_option(capsys):
+    """predict --stabilise was removed (it raised σ/μ everywhere measured, docs/results.md): a usage error."""
+    with pytest.raises(SystemExit) as exc:
+        main(["predict", "--checkpoint", "m.pt", "--input", "frames", "--out", "out", "--stabilise"])
+    assert exc.value.code == 2 and "unrecognized arguments: --stabilise" in capsys.readouterr().err
+
+
 def test_every_option_with_a_default_shows_it():
     sub = build_parser()._subparsers._group_actions[0]
     for name, parser in sub.choices.items():

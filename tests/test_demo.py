@@ -21,7 +21,7 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
         overrides=["train.max_steps=3", "train.val_every=3", "train.batch_size=2", "train.val_samples=4"],
     )
     saved = json.loads((out / "summary.json").read_text())
-    for key in ("abs_rel", "abs_rel_untrained", "scale_cv", "scale_cv_stabilised", "ate_mean", "minutes"):
+    for key in ("abs_rel", "abs_rel_untrained", "scale_cv", "ate_mean", "minutes"):
         assert key in saved and saved[key] == summary[key] and saved[key] >= 0
     report = (out / "report.md").read_text()
     # The preset's precision "auto", resolved for this CPU, is recorded and reported.
@@ -29,10 +29,7 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
     assert f"with precision {saved['precision']}" in report
     assert "| untrained |" in report and f"| trained ({recipe(saved['config'])[0]}) |" in report
     assert "constant velocity" in report
-    # The stabilised row is the same predictions × the stabiliser's factors, not a copy of the plain row.
-    stable = json.loads((out / "eval" / "depth_stabilised.json").read_text())
-    assert stable["scale_cv"] == saved["scale_cv_stabilised"] != saved["scale_cv"]
-    assert len(stable["stabiliser_factors"]) == stable["n_frames"] and "| trained + `predict --stabilise` |" in report
+    assert "stabilis" not in report and not (out / "eval" / "depth_stabilised.json").exists()  # removed
     # The demo evaluates the last step, chosen without ground truth, and the report says so.
     assert saved["checkpoint"]["selected_by"] == "none: the weights at that step"
     assert "last.pt, step 3; selected by: none: the weights at that step" in report
@@ -40,7 +37,6 @@ def test_demo_writes_report_summary_and_plots(tmp_path):
         "validation.png",
         "scale_boxplot.png",
         "scale_over_time.png",
-        "scale_over_time_stabilised.png",
         "abs_rel_histogram.png",
         "trajectory.png",
     ):

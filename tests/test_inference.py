@@ -17,7 +17,7 @@ from PIL import Image
 from posecons.checkpoint import load_checkpoint, load_model, save_checkpoint
 from posecons.cli import main
 from posecons.config import PRESETS, load_config
-from posecons.data.calib import normalised_to_pixel, read_calib_intrinsics
+from posecons.data.calib import read_calib_intrinsics
 from posecons.data.images import resize_rgb
 from posecons.data.synth import drive_folder, generate_synth
 from posecons.data.trajectory_io import read_kitti_poses, read_tum
@@ -221,34 +221,6 @@ def test_scale_multiplies_depth_and_translations(ckpt, frames_dir, base_run, tmp
     np.testing.assert_allclose(poses[:, :3, :3], base_poses[:, :3, :3], atol=1e-12)
     info = json.loads((out / "scale.json").read_text())
     assert info["method"] == "given" and info["value"] == 2.5
-
-
-def test_stabilise_multiplies_each_depth_by_the_stabilisers_factor(ckpt, frames_dir, base_run, tmp_path, capsys):
-    """predict --stabilise, streaming in batches of 2: each depth is the plain prediction × its factor,
-    the factors are the stabiliser's on the whole sequence of network-size depths and pose-net steps
-    with K at the network size, and the trajectory is untouched. Mutations checked: K at the input's
-    size, depths scaled before the ratios (s not cancelling) and the factor applied as 1/f all fail."""
-    from posecons.evaluation.evaluate import model_steps
-    from posecons.inference.stabilise import stabilise
-
-    out = tmp_path / "out"
-    args = ["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), "--out", str(out), "--quiet"]
-    assert main(args + ["--batch-size", "2", "--stabilise", "--time-constant", "5", "--scale", "3"]) == 0
-    assert "--stabilise used KITTI's intrinsics" in capsys.readouterr().err  # no camera given: a guess
-    factors = json.loads((out / "scale.json").read_text())["stabiliser"]["factors"]
-    predictor = load_predictor(ckpt, "cpu")
-    paths = sorted(frames_dir.iterdir())
-    disps = predictor.disparity(np.stack([resize_rgb(np.asarray(Image.open(p).convert("RGB")), 64, 96) for p in paths]))
-    K_pixel = torch.from_numpy(normalised_to_pixel(resolve_intrinsics(None, None, H, W), 64, 96))
-    expected = stabilise(1.0 / disps[:, 0].double(), torch.from_numpy(model_steps(predictor, paths)), K_pixel, 5)
-    np.testing.assert_allclose(factors, expected, rtol=1e-6)
-    assert max(abs(f - 1) for f in factors) > 1e-3  # the check above is not of ones only
-    for i, f in enumerate(factors):
-        base = np.load(base_run / "depth" / f"{i:010d}.npy")
-        np.testing.assert_allclose(np.load(out / "depth" / f"{i:010d}.npy"), base * 3 * f, rtol=1e-6)
-    base_poses, poses = (read_kitti_poses(d / "trajectory_kitti.txt") for d in (base_run, out))
-    np.testing.assert_allclose(poses[:, :3, 3], 3 * base_poses[:, :3, 3], rtol=1e-6, atol=1e-12)
-    assert (out / "stabiliser.png").is_file()
 
 
 def test_calibration_from_ground_truth_recovers_a_known_scale(ckpt, frames_dir, base_run, tmp_path):
@@ -473,6 +445,13 @@ def test_predict_pointcloud_every_kth_frame(ckpt, synth, frames_dir, tmp_path, c
     np.testing.assert_array_equal(colors, _frames(synth, 1)[2].reshape(-1, 3))
 
 
+def test_point_clouds_on_a_guessed_camera_are_warned_about(ckpt, frames_dir, tmp_path, capsys):
+    """Without --intrinsics or --calib the point clouds use KITTI's K: stderr says so."""
+    out = ["--out", str(tmp_path / "out"), "--quiet", "--pointcloud", "--every", "3", "--no-trajectory"]
+    assert main(["predict", "--checkpoint", str(ckpt), "--input", str(frames_dir), *out]) == 0
+    assert "--pointcloud used KITTI's intrinsics" in capsys.readouterr().err
+
+
 # ----------------------------------------------------------------------------- export
 
 
@@ -521,10 +500,10 @@ def test_export_matches_pytorch_and_predict_runs_from_onnx(ckpt, frames_dir, bas
     assert _leftovers(tmp_path / "strict") == []
 
 
-def test_a_known_motion_model_predicts_metres_and_no_motion(ckpt, frames_dir, tmp_path, capsys):
+def test_a_known_motion_model_predicts_metres_and_no_motion(ckpt, frames_dir, tmp_path):
     """Its pose net was never trained: predict says the depth is metric (scale 1), writes no
-    trajectory and refuses --stabilise; export leaves the pose graph out and says metres, and
-    predict from that export says metric too. A known_rotation model's depth has the usual free
+    trajectory; export leaves the pose graph out and says metres, and predict from that export says
+    metric too. A known_rotation model's depth has the usual free
     scale, and its pose net no trained rotation: no trajectory, no pose graph."""
     state = load_checkpoint(ckpt)
     state["config"]["model"]["known_motion"] = True
@@ -540,8 +519,6 @@ def test_a_known_motion_model_predicts_metres_and_no_motion(ckpt, frames_dir, tm
         )
         assert json.loads((out / "scale.json").read_text())["method"] == "metric"
         assert not (out / "trajectory_kitti.txt").exists()
-    stabilise = ["predict", "--checkpoint", str(metric), "--input", str(frames_dir), "--stabilise"]
-    _fails(stabilise, tmp_path / "stab", capsys, "no trained pose network")
     state["config"]["model"].update(known_motion=False, known_rotation=True)  # its rotation untrained
     save_checkpoint(gyro := tmp_path / "gyro.pt", state)
     assert (
@@ -614,8 +591,6 @@ def test_bad_inputs_give_one_clear_message_and_no_outputs(ckpt, frames_dir, tmp_
     no_images = tmp_path / "no_images"
     no_images.mkdir()
     _fails(predict_args + [str(no_images)], tmp_path / "o4", capsys, str(no_images), "no images")
-    no_pose = [str(frames_dir), "--stabilise", "--no-trajectory"]
-    _fails(predict_args + no_pose, tmp_path / "o4b", capsys, "--no-trajectory", "pose network")
 
     cfg = load_config(overrides=SMALL[:-1] + ["model.num_layers=18"]).to_dict()
     wrong = tmp_path / "wrong.pt"

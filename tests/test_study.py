@@ -286,6 +286,17 @@ def test_a_report_holds_only_the_runs_of_its_spec_seeds_and_variants(tmp_path):
     assert "| t_err (%) | r_err (°/100 m) |" in text and "| 163.95 ± 48.79 | 4.98 ± 0.41 |" in text  # untrained, 06
 
 
+def test_a_report_of_results_with_the_removed_stabilisers_depth_leaves_it_out(tmp_path):
+    """The committed 7-Scenes results hold "frame_stabilised" depth (from the removed `stabilise:` key):
+    their report still builds, from the plain depth alone."""
+    folder = Path(__file__).parents[1] / "docs/results/study_7scenes/json"
+    assert "frame_stabilised" in json.loads((folder / "cyc_seed0.json").read_text())["depth"]
+    report = tmp_path / "r.md"
+    assert main(["study", "--report-only", "--results", str(folder), "--report", str(report)]) == 0
+    text = report.read_text()
+    assert "| **mean σ/μ** (primary) | cyc | 6 |" in text and "stabilis" not in text
+
+
 def test_runs_are_paired_only_with_a_reference_run_that_computed_alike():
     """A seed's runs on another CPU kind, thread count or GPU than the reference's run of that seed
     are left out of the pairs and named; results that predate the records pair only with each other.
@@ -438,7 +449,7 @@ def test_spec_checks_and_bundled_specs(tmp_path):
     # study/7scenes: the real sequence beside the repository, one frame in five, 620 on held out.
     seven = load_spec("study/7scenes")
     assert Path(seven.data["rgbd"]["input"]) == (Path(__file__).resolve().parents[2] / "shared/real/7scenes").resolve()
-    assert seven.stabilise and seven.threads == 1 and len(seven.seeds) >= 6
+    assert seven.threads == 1 and len(seven.seeds) >= 6
     assert seven.config("baseline", 0).model.frame_ids == [0, -1, 1] and seven.config("cyc", 0).data.split == "custom"
     rgbd = dict(seven.data["rgbd"], input=str(tmp_path))
     for change, message in (
@@ -503,8 +514,8 @@ def test_jobs_run_side_by_side_in_worker_processes_and_pass_a_signal_on(tmp_path
 @pytest.mark.slow
 def test_an_rgbd_study_trains_on_one_stretch_and_scores_a_later_one_on_its_depth_images(tmp_path, capsys):
     """data.rgbd: the sequence is prepared once with its later stretch held out; each run (in worker
-    processes, which get --data-path as well) is scored on that stretch's depth images (dense ground truth in the spec's range, no crop) and poses, with the
-    depth after the test-time stabiliser too, and the report says so."""
+    processes, which get --data-path as well) is scored on that stretch's depth images (dense ground truth in the spec's range, no crop) and poses,
+    and the report says so."""
     import numpy as np
 
     from rgbd_sequence import write_sequence
@@ -515,21 +526,17 @@ def test_an_rgbd_study_trains_on_one_stretch_and_scores_a_later_one_on_its_depth
     rgbd = {"color": "frame-*.color.png", "depth": "frame-*.depth.png", "poses": "frame-*.pose.txt"}
     rgbd.update(calib="K.txt", depth_scale=1000, test_from=8, gap=2, min_depth=0.1, max_depth=3.0)
     overrides = ["model.height=64", "model.width=128", "model.frame_ids=[0,-1,1]", "data.split=custom"]
-    spec = write_spec(tmp_path / "rgbd.yaml", overrides=overrides + TINY[1:], data={"rgbd": rgbd}, stabilise=True)
+    spec = write_spec(tmp_path / "rgbd.yaml", overrides=overrides + TINY[1:], data={"rgbd": rgbd})
     out = tmp_path / "study"
     argv = ["study", "--spec", str(spec), "--out", str(out), "--data-path", str(source), "--quiet", "--jobs", "2"]
     assert main([*argv, "--accelerator", "cpu"]) == 0  # the workers get the sequence's folder too
     cyc = json.loads((out / "results" / "cyc_seed0.json").read_text())
     assert cyc["test_lines"] == [f"custom/custom_drive_0001_sync {k} l" for k in range(6)]  # source frames 8–13
-    for key in ("frame", "frame_stabilised"):
-        depth = cyc["depth"][key]
-        assert (depth["gt_kind"], depth["crop"], depth["depth_range"]) == ("dense", "none", [0.1, 3.0])
-        assert depth["n_frames"] == 6 and np.isfinite(depth["scale_cv"])
-    factors = cyc["depth"]["frame_stabilised"]["stabiliser_factors"]
-    assert factors[0] == 1 and len(factors) == 6 and factors != [1.0] * 6
+    depth = cyc["depth"]["frame"]
+    assert (depth["gt_kind"], depth["crop"], depth["depth_range"]) == ("dense", "none", [0.1, 3.0])
+    assert depth["n_frames"] == 6 and np.isfinite(depth["scale_cv"])
     assert set(cyc["pose"]) == {"00"} and cyc["pose"]["00"]["n_frames"] == 6
     report = (out / "results.md").read_text()
     assert "RGB-D sequence" in report and "Garg crop" not in report
-    assert "| **mean σ/μ** (primary) | cyc | 1 |" in report and "| σ/μ stabilised | cyc | 1 |" in report
-    assert "### With the test-time stabiliser" in report and "| cyc | 1 |" in report
+    assert "| **mean σ/μ** (primary) | cyc | 1 |" in report and "| cyc | 1 |" in report
     capsys.readouterr()

@@ -1,12 +1,12 @@
 """Metric scale without LiDAR on a study's held-out drives: each run's last weights predict the test
 drives, and each drive's scale is set once from the camera's height above the road fitted in its
 first N frames (what ``predict --camera-height`` does), then abs rel is measured with that one scale
-and no ground-truth scaling, beside per-frame and per-drive median scaling, and with the test-time
-stabiliser applied before calibrating ("calibrate once + stabilise"). The true height is the same fit
-on the ground truth of the same frames, so the method's error is the network's, not the fit's. With
---windows, every frame is also scaled by its own road plane (the predicted height a centred median over
-K frames, against that one true height): the σ/μ left after it, and its abs rel with no ground-truth
-scaling — a per-frame scale anchored to the camera's height cannot drift, which the stabiliser's does.
+and no ground-truth scaling, beside per-frame and per-drive median scaling. The true height is the
+same fit on the ground truth of the same frames, so the method's error is the network's, not the fit's.
+With --windows, every frame is also scaled by its own road plane (the predicted height a centred median
+over K frames, against that one true height): the σ/μ left after it, and its abs rel with no
+ground-truth scaling. (The column with the test-time stabiliser before calibrating went with the
+stabiliser; the tool at commit 085f365 has it.)
 
     python experiments/tools/camera_height.py study/synth_fast runs/study_fast baseline/0 cyc/0 [--frames 10]
 """
@@ -73,14 +73,12 @@ def camera_height_row(
     predictor = load_predictor(study / "runs" / variant / f"seed{seed}" / "checkpoints" / "last.pt")
     gts, _ = load_gt(data.gt)
     disps = evaluate.model_disparities(predictor, data.train_path, data.split)
-    stable, _ = evaluate.stabilised_disparities(predictor, data.train_path, data.split, disps)
 
     def scored(d: np.ndarray, scaling: str) -> dict:
         return evaluate.evaluate_depth(d, gts, data.split, data.gt_kind, scaling=scaling, depth_range=data.depth_range)
 
     true, predicted = frame_heights(disps, gts, data.split, data.train_path)
     camera = drive_scales(true, predicted, data.split, frames, None)
-    camera_stable = drive_scales(*frame_heights(stable, gts, data.split, data.train_path), data.split, frames, None)
     frame = scored(disps, "frame")
     scales, names = np.asarray(frame["scales"]), np.array([line.folder for line in data.split])
     drives = [names == name for name in dict.fromkeys(names)]
@@ -88,9 +86,6 @@ def camera_height_row(
         "abs_rel_frame": frame["abs_rel"],
         "abs_rel_drive": scored(disps, "sequence")["abs_rel"],
         "abs_rel_camera": scored(disps / camera[:, None, None].astype(np.float32), "none")["abs_rel"],
-        "abs_rel_camera_stabilised": scored(stable / camera_stable[:, None, None].astype(np.float32), "none")[
-            "abs_rel"
-        ],
         # each drive's calibrated scale over its median ground-truth scale (1: exact), averaged
         "camera_over_median": float(np.mean([camera[i].mean() / np.nanmedian(scales[i]) for i in drives])),
         "sigma_mu": frame["scale_cv"],

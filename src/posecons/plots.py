@@ -95,12 +95,9 @@ def plot_scales_over_time(
     path: str | Path,
     count: int = 5,
     normalise: bool = False,
-    title: str | None = None,
-    ylabel: str | None = None,
 ) -> Path:
     """Scale against frame number for the ``count`` sequences with the largest σ/μ in the first run,
-    one colour per sequence and one line style per run (label → (N,) scales of the same N frames);
-    ``title`` and ``ylabel`` replace the defaults, which speak of per-frame scales."""
+    one colour per sequence and one line style per run (label → (N,) scales of the same N frames)."""
     arrays = _runs(runs, normalise)
     frames = np.asarray(frames)
     first = next(iter(arrays.values()))
@@ -120,9 +117,9 @@ def plot_scales_over_time(
                 label=f"{label + '  ' if label else ''}{short_name(name)}  σ/μ={own:.3f}",
             )
     ax.set_xlabel("frame")
-    ax.set_ylabel(ylabel or ("scale / median scale of the run" if normalise else "median scale"))
+    ax.set_ylabel("scale / median scale of the run" if normalise else "median scale")
     order = "" if len(arrays) == 1 else f" (of {next(iter(runs))})"
-    ax.set_title(title or f"Scale over time, the {min(count, len(cv))} least consistent sequences{order}")
+    ax.set_title(f"Scale over time, the {min(count, len(cv))} least consistent sequences{order}")
     ax.legend(fontsize=7)
     return _save(fig, path)
 

@@ -21,7 +21,7 @@ from ..errors import Collapsed
 from ..evaluation import evaluate
 from ..evaluation.compare import checkpoint_note, result_cells, table1
 from ..fileio import write_json, write_text
-from ..plots import plot_scales_over_time, plot_validation
+from ..plots import plot_validation
 from ..training.initial_weights import save_initial_weights
 from ..training.trainer import train
 
@@ -90,18 +90,9 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     weights = describe_checkpoint(ckpt)
 
     print("[4/5] evaluating depth (Eigen metrics, σ/μ) and pose (ATE) on the held-out drives", flush=True)
-    results = evaluate.checkpoint_depth(ckpt, data, test_split, gt, stabilised=True)
-    depth = {**results["frame"], "checkpoint": weights}
-    stable = {**results["frame_stabilised"], "checkpoint": weights}
+    depth = {**evaluate.checkpoint_depth(ckpt, data, test_split, gt)["frame"], "checkpoint": weights}
     evaluate.write_depth_plots(depth, test_split, plots)
-    plot_scales_over_time(
-        {"network": depth["scales"], "stabilised": stable["scales"]},
-        [line.folder for line in test_split],
-        [line.frame for line in test_split],
-        plots / "scale_over_time_stabilised.png",
-    )
     write_json(ev / "depth.json", depth)
-    write_json(ev / "depth_stabilised.json", stable)
     pose = {**evaluate.checkpoint_pose(ckpt, data / "odometry", odom_seq, plots), "checkpoint": weights}
     write_json(ev / "pose.json", pose)
     validations = _read_jsonl(run / "metrics.jsonl")
@@ -118,8 +109,6 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
         "a1": depth["a1"],
         "scale_cv": depth["scale_cv"],
         "scale_cv_untrained": before["scale_cv"],
-        "scale_cv_stabilised": stable["scale_cv"],
-        "abs_rel_stabilised": stable["abs_rel"],
         "ate_mean": pose["ate_mean"],
         "ate_std": pose["ate_std"],
         "ate_full_rmse": pose["ate_full_rmse"],
@@ -135,7 +124,7 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
         "config": config.to_dict(),
     }
     write_json(out / "summary.json", summary)
-    write_text(out / "report.md", _report(summary, depth, before, stable, pose, odom_seq, meta))
+    write_text(out / "report.md", _report(summary, depth, before, pose, odom_seq, meta))
     if trained["collapse"]["problems"]:
         raise Collapsed(
             f"the depth collapsed in training: {'; '.join(trained['collapse']['problems'])} "
@@ -144,17 +133,13 @@ def run_demo(out: Path, seed: int = 0, synth: dict = SYNTH, overrides: list[str]
     return summary
 
 
-def _report(s: dict, depth: dict, before: dict, stable: dict, pose: dict, seq: str, meta: dict) -> str:
+def _report(s: dict, depth: dict, before: dict, pose: dict, seq: str, meta: dict) -> str:
     cv = pose["const_velocity"]
     m, t = s["config"]["model"], s["config"]["train"]
     label, words = recipe(s["config"])
     rows = [
         [name, *result_cells(r, scale_format=".4f")]
-        for name, r in (
-            ("untrained", before),
-            (f"trained ({label})", depth),
-            ("trained + `predict --stabilise`", stable),
-        )
+        for name, r in (("untrained", before), (f"trained ({label})", depth))
     ]
     collapse = "".join(
         f"**The depth collapsed in training**: {p}. The numbers below are not a result.\n\n"
@@ -181,13 +166,6 @@ Per-frame scales median(gt)/median(pred): σ/μ per sequence averaged = {depth["
 (pooled {depth["scale_cv_pooled"]:.4f}; std/median {depth["scale_std_over_median"]:.4f}).
 
 ![scales](plots/scale_boxplot.png) ![scale over time](plots/scale_over_time.png)
-
-The test-time stabiliser (`predict --stabilise`: each depth map × a factor chained from the network's
-own depth and poses of neighbouring frames, no ground truth) brings σ/μ from {depth["scale_cv"]:.4f} to
-{stable["scale_cv"]:.4f}. It multiplies whole maps, so it removes frame-to-frame jitter but cannot
-change a map's shape.
-
-![scale over time, network and stabilised](plots/scale_over_time_stabilised.png)
 
 ![abs rel histogram](plots/abs_rel_histogram.png)
 

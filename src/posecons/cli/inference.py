@@ -63,19 +63,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--fps", type=positive_float, default=DEFAULT_FPS, help="frame rate of image folders in Hz (timestamps)"
     )
-    p.add_argument(
-        "--stabilise",
-        action="store_true",
-        help="test-time scale stabilisation: each depth map × a factor from the network's own depth and "
-        "poses (no ground truth) that removes frame-to-frame scale jitter; factors in scale.json",
-    )
-    p.add_argument(
-        "--time-constant",
-        type=positive_float,
-        metavar="FRAMES",
-        help="the stabiliser's smoothing (default 30 frames, SPEC §12): longer removes more jitter, shorter "
-        "follows real scale changes sooner",
-    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
     e = add_command(subparsers, "export", export_command)
@@ -121,20 +108,10 @@ def predict_command(args: argparse.Namespace) -> int:
         trajectory=not args.no_trajectory,
         video=not args.no_video,
         fps=args.fps,
-        stabilise=args.stabilise,
-        **({"time_constant": args.time_constant} if args.time_constant else {}),
         progress=not args.quiet,
     ).check()
     summary = predict(load_predictor(args.checkpoint, args.device), args.input, args.out, options)
-    uses_k = [
-        name
-        for name, on in (
-            ("--camera-height", args.camera_height),
-            ("--pointcloud", args.pointcloud),
-            ("--stabilise", args.stabilise),
-        )
-        if on
-    ]
+    uses_k = [name for name, on in (("--camera-height", args.camera_height), ("--pointcloud", args.pointcloud)) if on]
     if uses_k and not (args.intrinsics or args.calib):  # after the work: the last thing the user reads
         print(
             f"posecons predict: warning: {' and '.join(uses_k)} used KITTI's intrinsics (fx = 0.58 × width, "

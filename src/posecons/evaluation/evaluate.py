@@ -5,25 +5,21 @@ the metrics of :mod:`posecons.metrics` with their provenance → JSON, plots and
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
-from ..data.calib import normalised_to_pixel, raw_intrinsics
 from ..data.gt import load_gt
 from ..data.images import load_rgb
 from ..data.kitti_odometry import list_sequence_frames
 from ..data.kitti_raw import split_image_paths
-from ..data.splits import SIDE_TO_CAMERA, SplitLine, SplitSource, read_split
+from ..data.splits import SplitLine, SplitSource, read_split
 from ..data.trajectory_io import read_kitti_poses, write_kitti_poses, write_tum
 from ..errors import PoseconsError
 from ..inference.backend import Predictor, StepChain, load_predictor, predict_batches
 from ..inference.media import frames_from_paths
-from ..inference.stabilise import DEFAULT_TIME_CONSTANT, stabilise
 from ..metrics.depth import (
     CROP_FOR_GT_KIND,
     MAX_DEPTH,
@@ -59,35 +55,6 @@ def model_steps(predictor: Predictor, paths: Sequence[Path], batch_size: int = 8
     for _, images, _ in predict_batches(predictor, frames_from_paths(paths), batch_size, depth=False):
         chain.add(images)
     return chain.steps()
-
-
-def stabilised_disparities(
-    predictor: Predictor,
-    data_path: str | Path,
-    split: SplitSource,
-    disps: np.ndarray,
-    time_constant: float = DEFAULT_TIME_CONSTANT,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The split's (N, h, w) network disparities ``disps`` divided by the test-time stabiliser's
-    factors (SPEC §12: from the network's own depths and pose-net steps, no ground truth), sequence by
-    sequence; → (disparities, (N,) factors). Each sequence's lines must be consecutive frames in order,
-    as in the synthetic test split (the stabiliser compares neighbouring frames)."""
-    lines, paths = read_split(split), split_image_paths(data_path, split)
-    factors = np.ones(len(lines))
-    for _, group in itertools.groupby(range(len(lines)), key=lambda i: (lines[i].folder, lines[i].side)):
-        index = list(group)
-        frames = [lines[i].frame for i in index]
-        if frames != list(range(frames[0], frames[0] + len(frames))):
-            raise PoseconsError(f"{lines[index[0]].where}: stabilising needs consecutive frames of a sequence in order")
-        if len(index) < 2:
-            continue
-        line = lines[index[0]]
-        date_dir = Path(data_path) / Path(line.folder).parent
-        K = normalised_to_pixel(raw_intrinsics(date_dir, SIDE_TO_CAMERA[line.side]), *disps.shape[1:])
-        steps = model_steps(predictor, [paths[i] for i in index])
-        depths = torch.from_numpy(1.0 / disps[index].astype(np.float64))
-        factors[index] = stabilise(depths, torch.from_numpy(steps), torch.from_numpy(K), time_constant)
-    return (disps / factors[:, None, None]).astype(disps.dtype), factors
 
 
 def load_pred_disps(path: Path) -> np.ndarray:
@@ -170,30 +137,21 @@ def checkpoint_depth(
     split: Sequence[SplitLine],
     gt_path: Path,
     scalings: Sequence[str] = ("frame",),
-    stabilised: bool = False,
     gt_kind: str = "lidar",
     depth_range: tuple[float, float] | None = None,
 ) -> dict[str, dict]:
     """{scaling: :func:`evaluate_depth`} of a checkpoint's disparities (predicted once) on the ``split``
     lines against the ground truth in ``gt_path`` (exported LiDAR, or ``gt_kind`` "dense" with its
-    ``depth_range``; ``checkpoint``: a path, or networks already loaded); with ``stabilised`` also
-    {"<scaling>_stabilised": ...} of the same disparities after :func:`stabilised_disparities`, whose
-    ``stabiliser_factors`` it records."""
+    ``depth_range``; ``checkpoint``: a path, or networks already loaded)."""
     gts, _ = load_gt(gt_path)
     predictor, name = _loaded(checkpoint)
-    runs = {"": model_disparities(predictor, data_path, split)}
-    if stabilised:
-        runs["_stabilised"], factors = stabilised_disparities(predictor, data_path, split, runs[""])
-    results = {
-        s + suffix: evaluate_depth(
+    disps = model_disparities(predictor, data_path, split)
+    return {
+        s: evaluate_depth(
             disps, gts, split, gt_kind, scaling=s, pred_name=name, gt_name=str(gt_path), depth_range=depth_range
         )
-        for suffix, disps in runs.items()
         for s in scalings
     }
-    for s in scalings if stabilised else ():
-        results[s + "_stabilised"]["stabiliser_factors"] = factors.tolist()
-    return results
 
 
 def checkpoint_pose(

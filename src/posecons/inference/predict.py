@@ -15,11 +15,6 @@ Output layout (``<name>`` is the image stem, or the 6-digit frame index of a vid
     OUT/video.mp4                video input: input | depth side by side
     OUT/trajectory_kitti.txt, trajectory_tum.txt, trajectory.png   camera → world poses
     OUT/scale.json, scale_drift.png (with ground truth), predict.json
-    OUT/stabiliser.png           with stabilise=True: each frame's factor
-
-With ``stabilise`` each depth map is also multiplied by the test-time stabiliser's factor
-(:mod:`.stabilise`, from the network's own depth and poses); the trajectory is left as the pose net
-gives it.
 """
 
 from __future__ import annotations
@@ -42,13 +37,12 @@ from ..errors import PoseconsError
 from ..fileio import output_dir
 from ..metrics.depth import drift_stats, frame_scale, resize_disparity, valid_mask
 from ..metrics.pose import global_from_relative
-from ..plots import colorize, colour_range, plot_scale_drift, plot_scales_over_time, plot_trajectory_topview
+from ..plots import colorize, colour_range, plot_scale_drift, plot_trajectory_topview
 from . import scale as scaling
 from .backend import Predictor, StepChain, predict_batches
 from .camera import resolve_intrinsics
 from .media import DEFAULT_FPS, Frame, FrameSource, SideBySideWriter
 from .pointcloud import depth_to_points, write_ply
-from .stabilise import DEFAULT_TIME_CONSTANT, StreamStabiliser
 
 
 @dataclass
@@ -66,8 +60,6 @@ class PredictOptions:
     trajectory: bool = True
     video: bool = True  # side-by-side MP4 for video input
     fps: float = DEFAULT_FPS  # timestamps of image folders
-    stabilise: bool = False  # test-time scale stabilisation (needs the pose net)
-    time_constant: float = DEFAULT_TIME_CONSTANT  # the stabiliser's smoothing, in frames
     progress: bool = True
 
     def check(self) -> PredictOptions:
@@ -77,9 +69,7 @@ class PredictOptions:
         for name in ("batch_size", "calibrate_frames", "every"):
             if getattr(self, name) < 1:
                 raise PoseconsError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.stabilise and not self.trajectory:
-            raise PoseconsError("stabilising needs the pose network: drop --no-trajectory")
-        for name in ("scale", "camera_height", "fps", "time_constant"):
+        for name in ("scale", "camera_height", "fps"):
             value = getattr(self, name)
             if value is not None and not value > 0:
                 raise PoseconsError(f"{name} must be positive, got {value}")
@@ -158,8 +148,6 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
     K_norm = resolve_intrinsics(options.intrinsics, options.calib, *first.size)
     gt = GroundTruth(options.calibrate_gt) if options.calibrate_gt else None
     do_pose = options.trajectory and predictor.has_pose
-    if options.stabilise and not predictor.has_pose:
-        raise PoseconsError(f"{predictor.name}: no trained pose network, so no stabilising (drop --stabilise)")
     start = time.perf_counter()
     result = calibrate(source, predictor, options, K_norm, gt)
     s = result.value
@@ -171,9 +159,6 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
             (tmp / name).mkdir()
         writer = SideBySideWriter(tmp / "video.mp4", fps) if source.is_video and options.video else None
         chain, times, drift, count, limits = StepChain(predictor), [], [], 0, None
-        K_net = torch.from_numpy(normalised_to_pixel(K_norm, predictor.height, predictor.width))
-        stabiliser = StreamStabiliser(K_net, options.time_constant) if options.stabilise else None
-        factors: list[float] = []
         bar = tqdm(total=len(source) or None, unit="frame", disable=not options.progress)
         # One thread writes a batch's outputs while the next batch is decoded and run through the
         # networks (which release the GIL); waiting for it before handing it the next batch keeps
@@ -181,21 +166,15 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
         with ThreadPoolExecutor(max_workers=1) as pool:
             written: list[Future] = []
             for frames, images, disps in predict_batches(predictor, source, options.batch_size):
-                steps = chain.add(images) if do_pose else None
-                batch_factors = [1.0] * len(frames)
-                if stabiliser is not None:  # depth and steps in the network's own units: s cancels in the ratios
-                    batch_factors = stabiliser.add(1.0 / disps[:, 0].double().cpu(), torch.from_numpy(steps))
-                    factors += batch_factors
-                depths = [
-                    full_size_depth(disp, *frame.size) * np.float32(s * f)
-                    for frame, disp, f in zip(frames, disps, batch_factors)
-                ]
+                if do_pose:
+                    chain.add(images)
+                depths = [full_size_depth(disp, *frame.size) * np.float32(s) for frame, disp in zip(frames, disps)]
                 if limits is None:  # one colour range for the sequence, from its first batch: no flicker
                     limits = colour_range(np.concatenate([1.0 / d.ravel() for d in depths]))
-                for frame, disp, f in zip(frames, disps, batch_factors):
+                for frame, disp in zip(frames, disps):
                     target = gt.get(frame.name, frame.index) if gt is not None else None
                     if target is not None:
-                        drift.append((frame.index, frame.name, gt_scale(target, disp / f)))
+                        drift.append((frame.index, frame.name, gt_scale(target, disp)))
                     times.append(frame.time)
                 for job in written:
                     job.result()
@@ -224,18 +203,6 @@ def predict(predictor: Predictor, input: str | Path, out: str | Path, options: P
             outputs += ["trajectory_kitti.txt", "trajectory_tum.txt", "trajectory.png"]
 
         scale_info = result.to_dict()
-        if factors:
-            scale_info["stabiliser"] = {"time_constant": options.time_constant, "factors": factors}
-            frames = np.arange(len(factors))
-            plot_scales_over_time(
-                {"": factors},
-                ["input"] * len(frames),
-                frames,
-                tmp / "stabiliser.png",
-                title="The stabiliser's factor on each frame's depth",
-                ylabel="factor",
-            )
-            outputs.append("stabiliser.png")
         if drift:
             index, per_frame = np.array([d[0] for d in drift]), np.array([d[2] for d in drift])
             scale_info["drift"] = {**drift_stats(per_frame, s), "per_frame": {name: float(v) for _, name, v in drift}}

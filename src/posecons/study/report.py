@@ -23,7 +23,6 @@ from .spec import CONSTANT, FLOOR, UNTRAINED
 
 STUDY_FILE = "study.json"
 FAILED = "failed"  # the subfolder of the failed runs' records
-STABILISED = "frame_stabilised"  # depth results of the stabilised disparities (spec `stabilise: true`)
 Getter = Callable[[dict], Any]
 POSE_COLUMNS = (
     ("ate_mean", "snippet ATE mean", ".4f"),
@@ -133,7 +132,7 @@ def depth_tables(names: Sequence[str], results: Sequence[dict]) -> str:
     frame_cols += [(_depth("frame", key), DIGITS) for key, _, _ in EIGEN_COLUMNS]
     scale = [f"σ/μ {short_name(s)}" for s in sequences] + ["σ/μ mean", "σ/median pooled"]
     seq_cols = [(_depth("sequence", key), DIGITS) for key, _, _ in EIGEN_COLUMNS]
-    text = (
+    return (
         "### Frame-median scaling (each frame scaled by median(gt)/median(pred))\n\n"
         + table1(_rows(names, frame_cols, results), ["variant", "n"], scale)
         + "\n### Per-sequence scaling (one factor per sequence: the median of its frame scales)\n\n"
@@ -141,21 +140,6 @@ def depth_tables(names: Sequence[str], results: Sequence[dict]) -> str:
         "error metrics are repeated; with one factor per sequence, a scale that drifts within a sequence "
         "shows up as error.\n\n" + table1(_rows(names, seq_cols, results), ["variant", "n"], [])
     )
-    stabilised = [n for n in names if any(r["variant"] == n and STABILISED in r["depth"] for r in results)]
-    if stabilised:
-        columns = [
-            (get, fmt)
-            for key, fmt in (("scale_cv", ".4f"), ("abs_rel", DIGITS))
-            for get in (_depth("frame", key), _depth(STABILISED, key))
-        ]
-        rows = _rows(stabilised, columns, [r for r in results if STABILISED in r["depth"]])
-        header = ["variant", "n", "σ/μ", "σ/μ stabilised", "abs rel", "abs rel stabilised"]
-        text += (
-            "\n### With the test-time stabiliser (`predict --stabilise`: the network's own depth and pose, no "
-            "ground truth)\n\nThe same disparities, each test frame's divided by the stabiliser's factor; "
-            "frame-median scaling.\n\n" + markdown_table(header, rows)
-        )
-    return text
 
 
 def pose_tables(names: Sequence[str], results: Sequence[dict]) -> str:
@@ -190,8 +174,6 @@ def paired_metrics(results: Sequence[dict]) -> list[tuple[str, Getter, str]]:
         ("abs rel, per-seq. scaling", _depth("sequence", "abs_rel"), ".4f"),
         ("δ<1.25", _depth("frame", "a1"), ".4f"),
     ]
-    if any(STABILISED in r["depth"] for r in results):
-        metrics += [("σ/μ stabilised", _depth(STABILISED, "scale_cv"), ".4f")]
     for seq in dict.fromkeys(seq for r in results for seq in r.get("pose", {})):
         metrics += [(f"snippet ATE {seq}", _pose(seq, "ate_mean"), ".4f")]
         metrics += [(f"full ATE {seq}", _pose(seq, "ate_full_rmse"), ".3f")]

@@ -89,7 +89,6 @@ class StudyData:
     sequences: list[str]  # test odometry sequences ("09")
     gt_kind: str = "lidar"  # "dense" for an RGB-D sequence's depth images
     depth_range: tuple[float, float] | None = None  # the valid ground truth (metres); None: KITTI's
-    stabilise: bool = False  # also score the depth after the test-time stabiliser
 
 
 class Progress:
@@ -178,7 +177,7 @@ def prepare_data(spec: StudySpec, out: Path) -> StudyData:
     """Generate the synthetic data or prepare the RGB-D sequence (once), or take the KITTI roots; export
     the test ground truth once."""
     if "rgbd" in spec.data:
-        return _prepare_rgbd(spec.data["rgbd"], out / "data", spec.stabilise)
+        return _prepare_rgbd(spec.data["rgbd"], out / "data")
     if "synth" in spec.data:
         root = out / "data"
         if not (root / "synth.json").is_file():
@@ -196,10 +195,10 @@ def prepare_data(spec: StudySpec, out: Path) -> StudyData:
     if not gt.is_file():
         print(f"[study] exporting the ground truth of {len(split)} test frames", flush=True)
         export_gt(root, split, gt)
-    return StudyData(root, split, gt, odometry, sequences, stabilise=spec.stabilise)
+    return StudyData(root, split, gt, odometry, sequences)
 
 
-def _prepare_rgbd(args: dict[str, Any], root: Path, stabilise: bool) -> StudyData:
+def _prepare_rgbd(args: dict[str, Any], root: Path) -> StudyData:
     """The sequence through prepare-rgbd into ``root`` (once): its test stretch is the test split, with
     its depth images as ground truth and its poses as odometry sequence 00."""
     from ..data.calib import read_intrinsics
@@ -219,7 +218,7 @@ def _prepare_rgbd(args: dict[str, Any], root: Path, stabilise: bool) -> StudyDat
         )
     split = read_split(root / "splits" / "custom" / "test_files.txt")
     depth_range = (args["min_depth"], args["max_depth"])
-    return StudyData(root, split, root / GT_FILE, root / "odometry", [SEQUENCE], "dense", depth_range, stabilise)
+    return StudyData(root, split, root / GT_FILE, root / "odometry", [SEQUENCE], "dense", depth_range)
 
 
 def _commit() -> str:
@@ -258,7 +257,7 @@ def environment(accelerator: str) -> dict[str, str]:
 def evaluate_weights(checkpoint: Path | Predictor, data: StudyData) -> dict[str, Any]:
     """Depth with both scalings and pose on each test sequence of one checkpoint (or of its networks)."""
     depth = evaluate.checkpoint_depth(
-        checkpoint, data.train_path, data.split, data.gt, SCALINGS, data.stabilise, data.gt_kind, data.depth_range
+        checkpoint, data.train_path, data.split, data.gt, SCALINGS, data.gt_kind, data.depth_range
     )
     pose = {seq: evaluate.checkpoint_pose(checkpoint, data.odometry, seq) for seq in data.sequences}
     return {"depth": depth, "pose": pose, "test_lines": [str(line) for line in data.split]}

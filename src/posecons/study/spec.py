@@ -16,7 +16,6 @@ data:                               # either synth (generated once into OUT/data
 #   odometry: /data/kitti_odometry    # optional (--odometry-path): the pose table
 #   odometry_sequences: [9, 10]
 seeds: [0, 1, 2]                    # train.seed of the runs
-stabilise: true                     # optional: also score each run's depth after the test-time stabiliser
 threads: 1                          # optional: the compute threads of every run (the outcome depends on
                                     # them as much as on the seed); unset, a run gets the process's share
 variants:                           # the first is the reference of the paired differences
@@ -41,7 +40,7 @@ import yaml
 from ..config import STUDY_SPECS, Config, load_config, resolve_preset
 from ..errors import PoseconsError
 
-KEYS = {"preset", "overrides", "data", "seeds", "variants", "threads", "stabilise"}
+KEYS = {"preset", "overrides", "data", "seeds", "variants", "threads"}
 SYNTH_ARGS = ("drives", "frames", "width", "height", "neighbours", "seed", "ext", "profile")  # generate_synth's
 OPTIONAL_SYNTH_ARGS = ("ext", "profile")
 PATH_KEYS = {"path", "test_split", "odometry", "odometry_sequences"}
@@ -63,7 +62,6 @@ class StudySpec:
     seeds: list[int]
     variants: dict[str, list[str]]
     threads: int | None = None  # compute threads of every run; None: the process's share
-    stabilise: bool = False  # also evaluate each run's depth after the test-time stabiliser (SPEC §12)
 
     @property
     def reference(self) -> str:
@@ -105,7 +103,6 @@ class StudySpec:
             "variants": self.variants,
             "reference": self.reference,
             "threads": self.threads,
-            "stabilise": self.stabilise,
         }
 
 
@@ -309,10 +306,7 @@ def load_spec(name: str | Path, data_path: Path | None = None, odometry_path: Pa
             seeds=_seeds(raw["seeds"]),
             variants=_variants(raw["variants"]),
             threads=_threads(raw.get("threads")),
-            stabilise=raw.get("stabilise", False),
         )
-        if not isinstance(spec.stabilise, bool):
-            raise PoseconsError(f"stabilise must be true or false, got {spec.stabilise!r}")
         for variant in spec.variants:
             if any(o.split("=", 1)[0].strip() == "train.seed" for o in spec.run_overrides(variant, 0)[:-1]):
                 raise PoseconsError(f"variant {variant!r}: train.seed is set by seeds:, not by an override")
