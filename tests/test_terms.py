@@ -12,7 +12,7 @@ from test_model import make_config, random_batch
 
 
 class MeanDisparity(Term):
-    """CONTRIBUTING.md's worked example: the target's mean disparity at scale 0."""
+    """The term of CONTRIBUTING.md's worked example (its equation inline): the target's mean disparity."""
 
     name, weight_key = "mean_disparity", "mean_disparity_weight"
 
