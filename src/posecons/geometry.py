@@ -215,6 +215,14 @@ def warp(source: torch.Tensor, depth: torch.Tensor, T: torch.Tensor, K: torch.Te
     return F.grid_sample(source, grid, mode="bilinear", padding_mode="border", align_corners=True)
 
 
+def resize_image(image: torch.Tensor, height: int, width: int) -> torch.Tensor:
+    """Antialiased bilinear resize of (B, C, H, W) images on their device (no-op at the same size): the
+    frames at each scale of the view synthesis."""
+    if image.shape[-2:] == (height, width):
+        return image
+    return F.interpolate(image, size=(height, width), mode="bilinear", align_corners=False, antialias=True)
+
+
 __all__ = [
     "axis_angle_to_matrix",
     "backproject",
@@ -230,6 +238,7 @@ __all__ = [
     "pose_vec_to_mat",
     "project",
     "project_depth",
+    "resize_image",
     "scale_intrinsics",
     "transform_points",
     "warp",
