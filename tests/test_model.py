@@ -638,3 +638,29 @@ def test_photometric_error_runs_eagerly_where_torch_compile_cannot_compile(monke
     assert compiled.photometric_error.fn is compiled.photometric_error.eager
     assert "torch.compile failed" in caplog.text and "no-such-compiler" in caplog.text
     assert all(torch.equal(got[k], want[k]) for k in want)
+
+
+def test_the_auto_mask_starts_at_its_step_and_before_it_every_pixel_counts():
+    """loss.automask_start_step=5: steps before 5 take the plain minimum over the warped sources (as
+    loss.automask=false does), step 5 on Monodepth2's auto-mask; the warp's gain is measured either way.
+    Catches the option ignored (step 4 masked) and an off-by-one (step 5 unmasked)."""
+    torch.manual_seed(0)
+    batch = random_batch()
+    delayed = PoseConsModel(make_config(**{"loss.automask_start_step": 5})).eval()
+    plain = copy.deepcopy(delayed)
+    plain.config = make_config(**{"loss.automask": "false"})
+    masked = copy.deepcopy(delayed)
+    masked.config = make_config()
+
+    def photometric(model, step):
+        torch.manual_seed(1)  # the auto-mask's tie-breaking noise
+        with torch.no_grad():
+            outputs, losses = model(batch, step=step)
+        return losses["photometric"], outputs
+
+    before, outputs = photometric(delayed, 4)
+    assert torch.equal(before, photometric(plain, 4)[0]) and outputs["automask"].all()
+    assert torch.isfinite(outputs["warp_gain"])
+    at, outputs = photometric(delayed, 5)
+    assert torch.equal(at, photometric(masked, 5)[0]) and not outputs["automask"].all()
+    assert at < before  # the unwarped sources now stand in where they are nearer the target

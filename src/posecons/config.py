@@ -76,6 +76,7 @@ RULES: dict[str, Check] = {
     "loss.id_weight": _at_least(0),
     "loss.cyc_weight": _at_least(0),
     "loss.constraint_start_step": _at_least(0),
+    "loss.automask_start_step": _at_least(0),
     "loss.depth_consistency_weight": _at_least(0),
     "loss.depth_consistency_form": _one_of("one_way", "sc_depth"),
     "loss.skip_weight": _at_least(0),
@@ -157,6 +158,8 @@ class LossConfig:
     ssim_weight: float = 0.85  # photometric error = a·(1-SSIM)/2 + (1-a)·L1
     smoothness_weight: float = 1e-3  # divided by 2^s at scale s
     automask: bool = True
+    # The auto-mask from this step on; before it every pixel counts (experiments/investigation.md §30)
+    automask_start_step: int = 0
     v1_multiscale: bool = False  # compute the photometric loss at each scale's native size
     constraints: list[str] = field(default_factory=list)  # any of "fb", "id", "cyc"
     fb_weight: float = 0.1

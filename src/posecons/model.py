@@ -122,7 +122,9 @@ class PoseConsModel(nn.Module):
         with torch.autocast(frames.device.type, enabled=False):
             ctx = StepContext(frames.float(), K, logits, disps, poses, P, source_disp, motions, self.photometric_error)
             values = {t.name: t(ctx) for t in active if t.before_view_synthesis}
-            losses, automask, warp_gain = self._view_synthesis_losses(ctx.frames, K, disps, poses, ctx.photometric_mask)
+            losses, automask, warp_gain = self._view_synthesis_losses(
+                ctx.frames, K, disps, poses, ctx.photometric_mask, masked=self._masks_static(step)
+            )
             values.update({t.name: t(ctx) for t in active if not t.before_view_synthesis})
             losses.update({t.name: values[t.name] for t in active})
             losses["total"] = losses["total"] + sum(t.weight * values[t.name] for t in active)
@@ -158,6 +160,14 @@ class PoseConsModel(nn.Module):
         sources = len(self.config.model.frame_ids) - 1
         return check_tensor("batch['motions']", batch["motions"], (b, sources, 4, 4)).float()
 
+    def _masks_static(self, step: int) -> bool:
+        """Whether the auto-mask is on at ``step``: from ``loss.automask_start_step`` on. Before it every
+        pixel counts, so a warp worse than no motion is seen wherever it is worse: a run whose first
+        steps point backwards is corrected instead of learning from the few pixels that a wrong warp
+        wins by chance (experiments/investigation.md §30)."""
+        lo = self.config.loss
+        return lo.automask and step >= lo.automask_start_step
+
     def _view_synthesis_losses(
         self,
         frames: torch.Tensor,
@@ -165,13 +175,15 @@ class PoseConsModel(nn.Module):
         disps: dict,
         poses: dict[int, torch.Tensor],
         masks: torch.Tensor | None = None,
+        masked: bool = True,
     ) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor]:
         """Min-reprojection with auto-masking plus smoothness, averaged over scales (SPEC §3–4);
         also the full-scale auto-mask (B, H, W), True where a warped source won, and the warp's gain
         at that scale: 1 − (mean best warped error) / (mean best unwarped error), > 0 where depth and
         pose explain the target better than no motion (NaN without the auto-mask, which alone
         computes the unwarped error). ``masks`` (B, S, H, W): weights of each source's reprojection
-        error before the minimum (SC-Depth's self-discovered mask, resized to each scale)."""
+        error before the minimum (SC-Depth's self-discovered mask, resized to each scale); ``masked``:
+        whether the minimum includes the unwarped sources (the auto-mask) at this step."""
         m, lo = self.config.model, self.config.loss
         h, w = m.height, m.width
         target, sources = frames[:, 0], [frames[:, i] for i in range(1, frames.shape[1])]
@@ -198,7 +210,7 @@ class PoseConsModel(nn.Module):
                 reproj = reproj * (masks if masks.shape[-2:] == size else F.interpolate(masks, size=size, mode="area"))
             if lo.automask and (identity is None or lo.v1_multiscale):
                 identity = torch.cat([self.photometric_error(src, tgt, lo.ssim_weight) for src in srcs], 1)
-            per_pixel, keep = min_reprojection(reproj, identity if lo.automask else None)
+            per_pixel, keep = min_reprojection(reproj, identity if lo.automask and masked else None)
             if automask is None:
                 automask, warp_gain = keep, torch.tensor(math.nan)
                 if lo.automask:
