@@ -66,18 +66,27 @@ def test_each_sign_of_a_collapse_is_a_problem_and_a_healthy_step_has_none(change
     assert problems({**HEALTHY, "warp_gain": float("nan")}) == {}  # no auto-mask: no verdict on the gain
 
 
-def test_the_watch_reports_a_problem_once_it_persists_after_the_start():
+def test_the_watch_warns_once_a_problem_persists_and_judges_the_end_on_the_last_steps():
     pinned = {**HEALTHY, "far_fraction": 1.0}
     watch = CollapseWatch(start=100)
-    assert watch.update(50, pinned) == [] and watch.update(60, pinned) == []  # the warm-up: not yet judged
-    assert watch.update(100, pinned) == []  # once is not yet a collapse
+    assert watch.update(50, pinned) == [] and watch.update(60, pinned) == []  # the warm-up: not judged
     assert watch.summary()["problems"] == []
+    assert watch.update(100, pinned) == []  # once is not yet a collapse
     said = watch.update(110, pinned)
     assert len(said) == 1 and "far end" in said[0]
     assert watch.update(120, pinned) == []  # said once per streak
     assert watch.summary() == {"step": 120, "signs": pinned, "problems": said}
-    assert watch.update(130, HEALTHY) == [] and watch.summary()["problems"] == []  # it came back
-    assert watch.update(140, pinned) == [] and watch.update(150, pinned) == said  # a new streak is said again
+    assert watch.update(130, HEALTHY) == [] and watch.update(140, pinned) == []  # a new streak starts
+    assert watch.update(150, pinned) == said  # and is said again
+    # the end judges the mean of the last three logged steps: one healthy batch does not clear a
+    # run that stays near no gain, and one bad batch does not condemn a healthy one
+    wavering = CollapseWatch(start=0)
+    for step, gain in ((400, -0.004), (450, 0.009), (500, -0.103)):
+        wavering.update(step, {**HEALTHY, "warp_gain": gain})
+    assert ["no better than the unwarped ones (gain -0.033)" in p for p in wavering.summary()["problems"]] == [True]
+    for step, gain in ((400, 0.2), (450, 0.25), (500, -0.1)):
+        wavering.update(step, {**HEALTHY, "warp_gain": gain})
+    assert wavering.summary()["problems"] == []
 
 
 @pytest.fixture(scope="module")

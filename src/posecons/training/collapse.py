@@ -5,7 +5,7 @@ its sigmoid (which then passes no gradient, so the run stays there), a depth tha
 everywhere in the image, or a depth and motion that reproduce the target no better than leaving the
 source frames unwarped (as an inverted depth does). :func:`collapse_signs` measures each on a training
 batch; :class:`CollapseWatch` follows them over the logged steps, warns once a problem has held on
-consecutive logged steps after the lr warm-up, and says at the end of the run what it saw
+consecutive logged steps after the lr warm-up, and judges the last few logged steps at the end
 (``train_summary.json``'s ``"collapse"``, and ``posecons demo`` fails on it).
 """
 
@@ -71,29 +71,35 @@ def problems(signs: dict[str, float]) -> dict[str, str]:
 
 
 class CollapseWatch:
-    """Follows :func:`collapse_signs` over the logged steps of a run; a problem counts once it has held
-    on :data:`PERSIST` logged steps in a row from step ``start`` on (before it, the lr warm-up is still
-    settling the motion's direction, and the untrained depth is flat by construction)."""
+    """Follows :func:`collapse_signs` over the logged steps of a run from step ``start`` on (before it,
+    the lr warm-up is still settling the motion's direction, and the untrained depth is flat by
+    construction). A problem is said once it has held on :data:`PERSIST` logged steps in a row; the
+    run's verdict at its end judges the mean of the signs over its last :data:`PERSIST` + 1 logged
+    steps, so that one batch neither hides nor makes a collapse."""
 
     def __init__(self, start: int):
         self.start = start
-        self.step, self.signs, self.current = 0, {}, {}
+        self.step, self.signs = 0, {}
         self._streak: dict[str, int] = {}
+        self._last: list[dict[str, float]] = []
 
     def update(self, step: int, signs: dict[str, float]) -> list[str]:
         """Record ``signs`` of ``step``; returns the problems that have just held for :data:`PERSIST`
         logged steps in a row (each is said once per streak)."""
         self.step, self.signs = step, signs
-        found = problems(signs) if step >= self.start else {}
+        if step < self.start:
+            return []
+        self._last = (self._last + [signs])[-(PERSIST + 1) :]
+        found = problems(signs)
         self._streak = {kind: self._streak.get(kind, 0) + 1 for kind in found}
-        self.current = {kind: text for kind, text in found.items() if self._streak[kind] >= PERSIST}
         return [text for kind, text in found.items() if self._streak[kind] == PERSIST]
 
     def summary(self) -> dict:
-        """What ``train_summary.json`` records: the last logged step's signs and the problems that held
-        there (empty: no sign of a collapse at the end of the run)."""
+        """What ``train_summary.json`` records: the last logged step's signs and the problems of the
+        mean signs of the last logged steps (empty: no sign of a collapse at the end of the run)."""
+        mean = {k: sum(s[k] for s in self._last) / len(self._last) for k in self.signs} if self._last else {}
         return {
             "step": self.step,
             "signs": {k: (v if math.isfinite(v) else None) for k, v in self.signs.items()},
-            "problems": list(self.current.values()),
+            "problems": list(problems(mean).values()) if mean else [],
         }
