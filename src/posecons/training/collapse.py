@@ -33,8 +33,9 @@ def collapse_signs(outputs: dict) -> dict[str, float]:
       auto-mask hides from the loss);
     - ``far_fraction`` / ``near_fraction``: shares of full-scale disparity sigmoids pinned at the far end
       (< 0.01) and at the near end (> 0.99, every such pixel at ``model.min_depth``);
-    - ``log_disp_spread``: the standard deviation of log disparity within each image, averaged over
-      the batch (0 for a constant depth; the depth's scale does not change it);
+    - ``log_disp_spread``: the standard deviation of the log of the full-scale disparity sigmoid within
+      each image, averaged over the batch (0 for a constant depth; a sigmoid scaled by one factor per
+      image does not change it);
     - ``warp_gain``: 1 − best warped error / best unwarped error at full scale (≤ 0: the depth and pose
       explain the target no better than no motion; NaN without the auto-mask).
     """
